@@ -1,0 +1,493 @@
+//! Configuration in two steps: serde structs that mirror the TOML file exactly
+//! (`deny_unknown_fields`, so a misspelt key is an error, not a silent default), then
+//! [`Config::validate`]-style checks that turn them into a [`Config`] whose fields can
+//! be trusted (finite, positive, consistent).
+//!
+//! Every error names the file, the key and the offending value, e.g.
+//! `probe.toml: cantilever.length_um must be > 0, got -3`.
+//! The documented defaults of every key live in `config/`.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::model::Cantilever;
+
+/// Default half-width of the Hough search window around each calibrated edge, degrees.
+pub const DEFAULT_WINDOW_DEG: f64 = 20.0;
+
+/// Something wrong with a configuration file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        file: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{file}: {message}")]
+    Parse { file: PathBuf, message: String },
+    #[error("{file}: {key} {reason}, got {value}")]
+    Invalid {
+        file: PathBuf,
+        key: String,
+        value: String,
+        reason: String,
+    },
+    #[error("{file}: {message}")]
+    Inconsistent { file: PathBuf, message: String },
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// The file it was read from (used in messages and to resolve relative paths).
+    pub path: PathBuf,
+    pub cantilever: Cantilever,
+    pub tracker: TrackerConfig,
+}
+
+/// How the frame is binarised before edge detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Threshold {
+    /// A fixed grey level (8-bit scale).
+    Level(u8),
+    /// Otsu's method on each frame's histogram.
+    Otsu,
+}
+
+impl fmt::Display for Threshold {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Threshold::Level(level) => write!(f, "{level}"),
+            Threshold::Otsu => f.write_str("\"otsu\""),
+        }
+    }
+}
+
+/// Validated `[tracker]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerConfig {
+    pub threshold: Threshold,
+    /// Half-width of the search window around each calibrated edge orientation, degrees.
+    pub window_deg: f64,
+    pub calibration: Option<CalibrationConfig>,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        TrackerConfig {
+            threshold: Threshold::Otsu,
+            window_deg: DEFAULT_WINDOW_DEG,
+            calibration: None,
+        }
+    }
+}
+
+/// Validated `[tracker.calibration]`: the reference frame and the pixels a person
+/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationConfig {
+    /// Resolved against the config file's directory.
+    pub reference_image: PathBuf,
+    pub red: Vec<[f64; 2]>,
+    pub blue: Vec<[f64; 2]>,
+    pub green: Vec<[f64; 2]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    cantilever: Option<RawCantilever>,
+    tracker: Option<RawTracker>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCantilever {
+    length_um: Option<f64>,
+    spring_constant_n_per_m: Option<f64>,
+    youngs_modulus_gpa: Option<f64>,
+    width_um: Option<f64>,
+    thickness_um: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTracker {
+    threshold: Option<toml::Value>,
+    window_deg: Option<f64>,
+    calibration: Option<RawCalibration>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCalibration {
+    reference_image: String,
+    red: Vec<[f64; 2]>,
+    blue: Vec<[f64; 2]>,
+    green: Vec<[f64; 2]>,
+}
+
+impl Config {
+    /// Reads and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_path_buf(),
+            source,
+        })?;
+        Config::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates TOML text; `path` names it in messages and anchors relative paths.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Config, ConfigError> {
+        let raw: RawConfig = toml::from_str(text).map_err(|err| ConfigError::Parse {
+            file: path.to_path_buf(),
+            message: err.to_string().trim_end().to_string(),
+        })?;
+        let check = Checker { file: path };
+        let cantilever = match raw.cantilever {
+            Some(raw) => check.cantilever(raw)?,
+            None => {
+                return Err(check.inconsistent(
+                    "missing [cantilever] section (length_um and a stiffness)".into(),
+                ))
+            }
+        };
+        let tracker = match raw.tracker {
+            Some(raw) => check.tracker(raw)?,
+            None => TrackerConfig::default(),
+        };
+        Ok(Config {
+            path: path.to_path_buf(),
+            cantilever,
+            tracker,
+        })
+    }
+}
+
+/// Validation helpers that know which file they are checking.
+struct Checker<'a> {
+    file: &'a Path,
+}
+
+impl Checker<'_> {
+    fn invalid(&self, key: &str, value: impl fmt::Display, reason: &str) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_path_buf(),
+            key: key.to_string(),
+            value: value.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+
+    fn inconsistent(&self, message: String) -> ConfigError {
+        ConfigError::Inconsistent {
+            file: self.file.to_path_buf(),
+            message,
+        }
+    }
+
+    /// A finite, strictly positive number.
+    fn positive(&self, key: &str, value: f64) -> Result<f64, ConfigError> {
+        if value.is_finite() && value > 0.0 {
+            Ok(value)
+        } else {
+            Err(self.invalid(key, value, "must be a finite number > 0"))
+        }
+    }
+
+    fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
+        let length_um = match raw.length_um {
+            Some(v) => self.positive("cantilever.length_um", v)?,
+            None => return Err(self.inconsistent("missing cantilever.length_um".into())),
+        };
+        let section = [raw.youngs_modulus_gpa, raw.width_um, raw.thickness_um];
+        let any_section = section.iter().any(Option::is_some);
+        let flexural_rigidity_n_m2 = match (raw.spring_constant_n_per_m, any_section) {
+            (Some(_), true) => {
+                return Err(self.inconsistent(
+                    "cantilever: give either spring_constant_n_per_m or \
+                     youngs_modulus_gpa + width_um + thickness_um, not both"
+                        .into(),
+                ))
+            }
+            (None, false) => {
+                return Err(self.inconsistent(
+                    "cantilever: missing stiffness: give spring_constant_n_per_m, or \
+                     youngs_modulus_gpa + width_um + thickness_um"
+                        .into(),
+                ))
+            }
+            (Some(k), false) => {
+                let k = self.positive("cantilever.spring_constant_n_per_m", k)?;
+                Cantilever::rigidity_from_spring_constant(k, length_um)
+            }
+            (None, true) => {
+                let names = [
+                    "cantilever.youngs_modulus_gpa",
+                    "cantilever.width_um",
+                    "cantilever.thickness_um",
+                ];
+                let mut values = [0.0; 3];
+                for ((slot, value), name) in values.iter_mut().zip(section).zip(names) {
+                    *slot = match value {
+                        Some(v) => self.positive(name, v)?,
+                        None => {
+                            return Err(self.inconsistent(format!(
+                                "missing {name} (the cross-section needs youngs_modulus_gpa, \
+                                 width_um and thickness_um)"
+                            )))
+                        }
+                    };
+                }
+                Cantilever::rigidity_from_section(values[0], values[1], values[2])
+            }
+        };
+        Ok(Cantilever::new(length_um, flexural_rigidity_n_m2))
+    }
+
+    fn tracker(&self, raw: RawTracker) -> Result<TrackerConfig, ConfigError> {
+        let threshold = match raw.threshold {
+            None => Threshold::Otsu,
+            Some(toml::Value::String(s)) if s.eq_ignore_ascii_case("otsu") => Threshold::Otsu,
+            Some(toml::Value::Integer(level)) => match u8::try_from(level) {
+                Ok(level) => Threshold::Level(level),
+                Err(_) => {
+                    return Err(self.invalid(
+                        "tracker.threshold",
+                        level,
+                        "must be a grey level 0..=255 or \"otsu\"",
+                    ))
+                }
+            },
+            Some(other) => {
+                return Err(self.invalid(
+                    "tracker.threshold",
+                    other,
+                    "must be a grey level 0..=255 or \"otsu\"",
+                ))
+            }
+        };
+        let window_deg = match raw.window_deg {
+            None => DEFAULT_WINDOW_DEG,
+            Some(w) if w.is_finite() && w > 0.0 && w <= 45.0 => w,
+            Some(w) => {
+                return Err(self.invalid("tracker.window_deg", w, "must be in (0, 45] degrees"))
+            }
+        };
+        let calibration = raw.calibration.map(|c| self.calibration(c)).transpose()?;
+        Ok(TrackerConfig {
+            threshold,
+            window_deg,
+            calibration,
+        })
+    }
+
+    fn calibration(&self, raw: RawCalibration) -> Result<CalibrationConfig, ConfigError> {
+        if raw.reference_image.trim().is_empty() {
+            return Err(self.invalid(
+                "tracker.calibration.reference_image",
+                "\"\"",
+                "must name an image file",
+            ));
+        }
+        for (name, points) in [
+            ("red", &raw.red),
+            ("blue", &raw.blue),
+            ("green", &raw.green),
+        ] {
+            let key = format!("tracker.calibration.{name}");
+            if points.len() < 2 {
+                return Err(self.invalid(
+                    &key,
+                    format_args!("{} point(s)", points.len()),
+                    "needs at least two clicked pixels",
+                ));
+            }
+            if let Some(p) = points
+                .iter()
+                .find(|p| !(p[0].is_finite() && p[1].is_finite()))
+            {
+                return Err(self.invalid(&key, format_args!("{p:?}"), "must hold finite pixels"));
+            }
+            let spread = points
+                .iter()
+                .map(|p| (p[0] - points[0][0]).hypot(p[1] - points[0][1]))
+                .fold(0.0, f64::max);
+            if spread < 2.0 {
+                return Err(self.invalid(
+                    &key,
+                    format_args!("{points:?}"),
+                    "needs points at least 2 px apart to define a direction",
+                ));
+            }
+        }
+        let base = self.file.parent().unwrap_or(Path::new(""));
+        Ok(CalibrationConfig {
+            reference_image: base.join(raw.reference_image),
+            red: raw.red,
+            blue: raw.blue,
+            green: raw.green,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config, ConfigError> {
+        Config::from_toml_str(text, Path::new("probe.toml"))
+    }
+
+    const SAMPLE: &str = r#"
+[cantilever]
+length_um = 434.675
+spring_constant_n_per_m = 0.0600
+
+[tracker]
+threshold = "otsu"
+window_deg = 20.0
+
+[tracker.calibration]
+reference_image = "reference.png"
+red = [[156.8, 33.4], [228.3, 57.3], [299.9, 81.0]]
+blue = [[230.7, 114.2], [245.4, 153.4], [260.6, 192.0]]
+green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
+"#;
+
+    #[test]
+    fn sample_config_parses() {
+        let cfg = Config::from_toml_str(SAMPLE, Path::new("/data/s/probe.toml")).unwrap();
+        assert_eq!(cfg.cantilever.length_um, 434.675);
+        let ei = 0.06 * (434.675e-6f64).powi(3) / 3.0;
+        assert!((cfg.cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
+        assert_eq!(cfg.tracker.threshold, Threshold::Otsu);
+        let cal = cfg.tracker.calibration.unwrap();
+        assert_eq!(cal.reference_image, Path::new("/data/s/reference.png"));
+        assert_eq!(cal.green.len(), 3);
+    }
+
+    #[test]
+    fn integer_threshold_and_integer_stiffness() {
+        let cfg = parse(
+            "[cantilever]\nlength_um = 383\nspring_constant_n_per_m = 40\n[tracker]\nthreshold = 146\n",
+        )
+        .unwrap();
+        assert_eq!(cfg.tracker.threshold, Threshold::Level(146));
+        assert_eq!(cfg.tracker.window_deg, DEFAULT_WINDOW_DEG);
+    }
+
+    #[test]
+    fn cross_section_stiffness() {
+        let cfg = parse(
+            "[cantilever]\nlength_um = 450\nyoungs_modulus_gpa = 169\nwidth_um = 50\nthickness_um = 2\n",
+        )
+        .unwrap();
+        let ei = 169e9 * 50e-6 * (2e-6f64).powi(3) / 12.0;
+        assert!((cfg.cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
+    }
+
+    fn error_of(text: &str) -> String {
+        parse(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn negative_length_names_file_key_and_value() {
+        let msg = error_of("[cantilever]\nlength_um = -3\nspring_constant_n_per_m = 1\n");
+        assert_eq!(
+            msg,
+            "probe.toml: cantilever.length_um must be a finite number > 0, got -3"
+        );
+    }
+
+    #[test]
+    fn non_finite_values_are_rejected() {
+        let msg = error_of("[cantilever]\nlength_um = 400\nspring_constant_n_per_m = nan\n");
+        assert!(msg.contains("cantilever.spring_constant_n_per_m"), "{msg}");
+        assert!(msg.contains("NaN"), "{msg}");
+        let msg = error_of("[cantilever]\nlength_um = inf\nspring_constant_n_per_m = 1\n");
+        assert!(
+            msg.contains("cantilever.length_um") && msg.contains("inf"),
+            "{msg}"
+        );
+        let msg = error_of(
+            "[cantilever]\nlength_um = 400\nyoungs_modulus_gpa = 169\nwidth_um = 0\nthickness_um = 2\n",
+        );
+        assert!(
+            msg.contains("cantilever.width_um") && msg.contains("got 0"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn both_or_neither_stiffness_is_an_error() {
+        let both = error_of(
+            "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\nyoungs_modulus_gpa = 169\n",
+        );
+        assert!(
+            both.starts_with("probe.toml: ") && both.contains("not both"),
+            "{both}"
+        );
+        let neither = error_of("[cantilever]\nlength_um = 400\n");
+        assert!(neither.contains("missing stiffness"), "{neither}");
+        let partial = error_of("[cantilever]\nlength_um = 400\nyoungs_modulus_gpa = 169\n");
+        assert!(partial.contains("missing cantilever.width_um"), "{partial}");
+    }
+
+    #[test]
+    fn unknown_key_names_file_and_key() {
+        let msg = error_of("[cantilever]\nlength_um = 400\nspring_k = 3\n");
+        assert!(msg.starts_with("probe.toml: "), "{msg}");
+        assert!(msg.contains("spring_k"), "{msg}");
+        let msg =
+            error_of("[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n[trackr]\n");
+        assert!(msg.contains("trackr"), "{msg}");
+    }
+
+    #[test]
+    fn wrong_type_is_an_error() {
+        let msg = error_of("[cantilever]\nlength_um = \"long\"\nspring_constant_n_per_m = 1\n");
+        assert!(msg.contains("length_um") && msg.contains("long"), "{msg}");
+    }
+
+    #[test]
+    fn tracker_fields_are_checked() {
+        let base = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n[tracker]\n";
+        let msg = error_of(&format!("{base}threshold = 300\n"));
+        assert_eq!(
+            msg,
+            "probe.toml: tracker.threshold must be a grey level 0..=255 or \"otsu\", got 300"
+        );
+        let msg = error_of(&format!("{base}threshold = \"mean\"\n"));
+        assert!(msg.contains("\"mean\""), "{msg}");
+        let msg = error_of(&format!("{base}window_deg = 0\n"));
+        assert!(
+            msg.contains("tracker.window_deg") && msg.contains("got 0"),
+            "{msg}"
+        );
+        let msg = error_of(&format!(
+            "{base}[tracker.calibration]\nreference_image = \"r.png\"\nred = [[1.0, 2.0]]\n\
+             blue = [[0.0, 0.0], [9.0, 9.0]]\ngreen = [[0.0, 0.0], [9.0, 9.0]]\n"
+        ));
+        assert!(
+            msg.contains("tracker.calibration.red") && msg.contains("1 point"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn missing_cantilever_section() {
+        let msg = error_of("[tracker]\nthreshold = 100\n");
+        assert!(msg.contains("missing [cantilever]"), "{msg}");
+    }
+
+    #[test]
+    fn unreadable_file_names_it() {
+        let err = Config::load(Path::new("/nonexistent/probe.toml")).unwrap_err();
+        assert!(err
+            .to_string()
+            .starts_with("/nonexistent/probe.toml: cannot read"));
+    }
+}

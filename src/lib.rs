@@ -1,0 +1,13 @@
+//! nanoforce: vision-based force feedback for nanomanipulation inside an SEM.
+//!
+//! An AFM cantilever on a Zyvex S100 is tracked in SEM frames; the rotation of its rigid
+//! tip gives the slope of the beam's free end, the exact large-deflection elastica turns
+//! that slope into a force, and the force is fed back to the operator's haptic device.
+//!
+//! Modules are cut by domain:
+//! - [`model`]: the cantilever physics (exact elastica, lookup table, stiffness).
+//! - [`config`]: TOML files -> validated [`config::Config`].
+//! - [`cli`]: the command-line front end over the library.
+pub mod cli;
+pub mod config;
+pub mod model;
