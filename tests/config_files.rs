@@ -1,0 +1,29 @@
+//! Every configuration file shipped in `config/` must load and validate.
+use std::path::Path;
+
+use nanoforce::config::Config;
+
+#[test]
+fn shipped_example_probe_config_is_valid() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/probe.example.toml");
+    let cfg = Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cfg.cantilever.length_um, 434.675);
+    assert!(cfg.tracker.calibration.is_some());
+}
+
+#[test]
+fn public_sample_configs_are_valid() {
+    for name in ["mixed", "sequence"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/samples")
+            .join(name)
+            .join("probe.toml");
+        let cfg = Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let cal = cfg.tracker.calibration.expect("calibration block");
+        assert!(
+            cal.reference_image.exists(),
+            "{}",
+            cal.reference_image.display()
+        );
+    }
+}
