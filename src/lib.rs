@@ -10,4 +10,5 @@
 //! - [`cli`]: the command-line front end over the library.
 pub mod cli;
 pub mod config;
+pub mod control;
 pub mod model;
