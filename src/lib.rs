@@ -11,4 +11,6 @@
 pub mod cli;
 pub mod config;
 pub mod control;
+pub mod daemon;
+pub mod hw;
 pub mod model;
