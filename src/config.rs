@@ -13,7 +13,10 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
+use crate::daemon::config::{DaemonConfig, RawDaemon};
+use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
+use crate::sim::config::{RawSim, SimConfig};
 
 /// Default half-width of the Hough search window around each calibrated edge, degrees.
 pub const DEFAULT_WINDOW_DEG: f64 = 20.0;
@@ -48,6 +51,11 @@ pub struct Config {
     pub tracker: TrackerConfig,
     /// `[teleop]` and `[safety]`: the gains SIGHUP may reload.
     pub teleop: TeleopGains,
+    /// `[frames]`, `[daq]`, `[haptic]`: which backend drives each device.
+    pub devices: DevicesConfig,
+    pub daemon: DaemonConfig,
+    /// `[sim]`: the simulated lab, used by every `"sim"` backend.
+    pub sim: SimConfig,
 }
 
 /// How the frame is binarised before edge detection.
@@ -105,6 +113,11 @@ struct RawConfig {
     tracker: Option<RawTracker>,
     teleop: Option<RawTeleop>,
     safety: Option<RawSafety>,
+    frames: Option<RawDevice>,
+    daq: Option<RawDevice>,
+    haptic: Option<RawDevice>,
+    daemon: Option<RawDaemon>,
+    sim: Option<RawSim>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -168,11 +181,22 @@ impl Config {
             raw.safety.unwrap_or_default(),
             &check,
         )?;
+        let devices = DevicesConfig::validate(
+            raw.frames.unwrap_or_default(),
+            raw.daq.unwrap_or_default(),
+            raw.haptic.unwrap_or_default(),
+            &check,
+        )?;
+        let daemon = DaemonConfig::validate(raw.daemon.unwrap_or_default(), &check)?;
+        let sim = SimConfig::validate(raw.sim.unwrap_or_default(), &check)?;
         Ok(Config {
             path: path.to_path_buf(),
             cantilever,
             tracker,
             teleop,
+            devices,
+            daemon,
+            sim,
         })
     }
 }

@@ -14,3 +14,4 @@ pub mod control;
 pub mod daemon;
 pub mod hw;
 pub mod model;
+pub mod sim;

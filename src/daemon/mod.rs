@@ -11,6 +11,7 @@
 //! The blocking loops are plain threads rather than async tasks: a capture call, a
 //! tracker pass or a 1 kHz deadline must never wait on an executor, and async is only
 //! the wiring around them.
+pub mod config;
 pub mod haptic_loop;
 pub mod notify;
 pub mod pipeline;

@@ -3,6 +3,7 @@
 //! [`haptic::HapticDevice`] (the operator's stylus). Each kind has a simulated backend;
 //! real backends sit behind cargo features. The daemon cannot tell them apart.
 pub mod clock;
+pub mod config;
 pub mod daq;
 pub mod frames;
 pub mod haptic;

@@ -22,3 +22,4 @@ pub trait RateOutput: Send {
         self.write_velocity(now_s, Vector3::zeros())
     }
 }
+pub mod sim;

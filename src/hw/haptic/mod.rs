@@ -31,3 +31,4 @@ pub trait HapticDevice: Send {
     /// Turns force output on or off; off must leave the stylus free.
     fn set_forces_enabled(&mut self, enabled: bool) -> Result<(), HapticError>;
 }
+pub mod sim;
