@@ -6,6 +6,7 @@
 //!
 //! Modules are cut by domain:
 //! - [`model`]: the cantilever physics (exact elastica, lookup table, stiffness).
+//! - [`scene`]: synthetic SEM frames with ground truth (tests, benches, simulator).
 //! - [`config`]: TOML files -> validated [`config::Config`].
 //! - [`cli`]: the command-line front end over the library.
 pub mod cli;
@@ -14,3 +15,4 @@ pub mod control;
 pub mod daemon;
 pub mod hw;
 pub mod model;
+pub mod scene;
