@@ -84,22 +84,33 @@ impl Shading {
         }
     }
 
-    /// Writes the bilinearly interpolated shading into a row-major frame.
-    pub fn fill(&self, canvas: &mut [f32], width: usize) {
+    /// Writes the bilinearly interpolated shading into a row-major frame; `line` is
+    /// scratch space for one interpolated grid row.
+    pub fn fill(&self, canvas: &mut [f32], width: usize, line: &mut Vec<f32>) {
         let inv = 1.0 / self.cell;
+        line.resize(self.cols, 0.0);
         for (y, row) in canvas.chunks_exact_mut(width).enumerate() {
             let fy = y as f64 * inv;
             let j = (fy as usize).min(self.rows - 2);
             let ty = (fy - j as f64) as f32;
             let top = &self.values[j * self.cols..(j + 1) * self.cols];
             let bottom = &self.values[(j + 1) * self.cols..(j + 2) * self.cols];
-            for (x, out) in row.iter_mut().enumerate() {
-                let fx = x as f64 * inv;
-                let i = (fx as usize).min(self.cols - 2);
-                let tx = (fx - i as f64) as f32;
-                let upper = top[i] + (top[i + 1] - top[i]) * tx;
-                let lower = bottom[i] + (bottom[i + 1] - bottom[i]) * tx;
-                *out = upper + (lower - upper) * ty;
+            for ((l, &t), &b) in line.iter_mut().zip(top).zip(bottom) {
+                *l = t + (b - t) * ty;
+            }
+            // Linear ramps between grid columns.
+            let mut x = 0usize;
+            for i in 0..self.cols - 1 {
+                let end = (((i + 1) as f64 * self.cell).ceil() as usize).min(width);
+                let slope = (line[i + 1] - line[i]) * inv as f32;
+                let origin = i as f64 * self.cell;
+                for (k, out) in row[x..end].iter_mut().enumerate() {
+                    *out = line[i] + slope * ((x + k) as f64 - origin) as f32;
+                }
+                x = end;
+                if x >= width {
+                    break;
+                }
             }
         }
     }

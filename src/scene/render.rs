@@ -50,6 +50,7 @@ pub struct Renderer {
     polygon: Vec<[f64; 2]>,
     inset: Vec<[f64; 2]>,
     row: Vec<f32>,
+    line: Vec<f32>,
 }
 
 impl Renderer {
@@ -65,7 +66,8 @@ impl Renderer {
             *frame = GrayImage::new(spec.width, spec.height);
         }
         for (out, &v) in frame.iter_mut().zip(&self.canvas) {
-            *out = v.round().clamp(0.0, 255.0) as u8;
+            // `as` saturates: negatives (and NaN) give 0, above 255 gives 255.
+            *out = (v + 0.5) as u8;
         }
         truth
     }
@@ -94,7 +96,7 @@ impl Renderer {
         let w = spec.width as usize;
         let mut rng = Rng::new(sub_seed(spec.seed, STREAM_SHADING));
         self.shading.generate(spec, &mut rng);
-        self.shading.fill(&mut self.canvas, w);
+        self.shading.fill(&mut self.canvas, w, &mut self.line);
         let mut rng = Rng::new(sub_seed(spec.seed, STREAM_SCRATCHES));
         clutter::scratches(spec, &mut rng, &mut self.scratches);
         for s in &self.scratches {
