@@ -9,15 +9,21 @@
 //! (angle, force, apex, the true red/blue/green edges); the same spec gives the same
 //! bytes on every run.
 //!
+//! [`Session`] writes the on-disk layout of scene.md (probe.toml with calibration clicks,
+//! reference.png, frames/, truth.csv) for random-order mixed sets and time sequences;
+//! [`suite`] generates the tracker's accuracy suite spanning every condition.
+//!
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of
 //! the bent beam is [`crate::model`]'s exact elastica; nothing here duplicates it.
 mod blur;
 mod clutter;
+mod generate;
 mod geometry;
 mod raster;
 mod render;
 pub mod rng;
+mod session;
 mod spec;
 
 use std::cell::RefCell;
@@ -25,8 +31,12 @@ use std::cell::RefCell;
 use image::GrayImage;
 
 pub use clutter::{Particle, Scratch};
+pub use generate::{random_frame, suite, varied_look, BLANK_FRACTION};
 pub use geometry::{px_per_um, Edges, Entry, Pose, ProbeGeometry, Segment, FIELD_WIDTH_AT_1X_UM};
 pub use render::{force_nn, Renderer, Truth};
+pub use session::{
+    Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
+};
 pub use spec::{FrameSpec, Look, Style};
 
 thread_local! {
