@@ -7,7 +7,9 @@
 //! Modules are cut by domain:
 //! - [`model`]: the cantilever physics (exact elastica, lookup table, stiffness).
 //! - [`config`]: TOML files -> validated [`config::Config`].
+//! - [`vision`]: the tip tracker and its calibration.
 //! - [`cli`]: the command-line front end over the library.
 pub mod cli;
 pub mod config;
 pub mod model;
+pub mod vision;
