@@ -239,7 +239,7 @@ mod tests {
         let peak = Peak {
             edge: 0,
             psi: 2f64.to_radians(),
-            rho: 82.0,
+            rho: 78.0,
             votes: 60,
         };
         let mut c = Candidates::default();
