@@ -21,3 +21,22 @@ fn debug_samples() {
         println!("{name}: {:?}", score(&s.truth, &est));
     }
 }
+
+#[test]
+fn debug_scale() {
+    for name in ["mixed", "sequence"] {
+        let s = sample(name);
+        let est = s.run(false);
+        for (t, e) in s.truth.iter().zip(&est) {
+            if let Some(sc) = e.scale {
+                println!(
+                    "{name} {} mag {} scale {:.4} -> ref mag {:.1}",
+                    t.frame,
+                    t.magnification,
+                    sc,
+                    t.magnification / sc
+                );
+            }
+        }
+    }
+}

@@ -434,7 +434,8 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
             offset: lines[e].rho - dot(n, apex),
             tip_tau: if e == RED { tip_tau } else { 0.0 },
             far_tau,
-            far_open: false,
+            // The beam goes on to its clamp, whatever the reference showed of it.
+            far_open: e == RED,
         };
     }
     // Each side of the pyramid must have the other on its bright side.

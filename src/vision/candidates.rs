@@ -11,6 +11,9 @@ use super::hough::Peak;
 const INLIER_PX: f64 = 1.5;
 /// Largest difference between a pixel's gradient and the line's normal, radians.
 const INLIER_ANGLE_RAD: f64 = 0.2;
+/// Two candidates of one edge closer than this in angle and offset are one line.
+const DUPLICATE_ANGLE_RAD: f64 = 0.02;
+const DUPLICATE_PX: f64 = 1.0;
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
 pub const PROFILE_BINS: usize = 1024;
 
@@ -85,10 +88,21 @@ impl Candidates {
                 bins: 0,
                 slot,
             };
-            if self.profile(&mut cand, points, size) {
+            if !self.duplicate(&cand) && self.profile(&mut cand, points, size) {
                 self.list.push(cand);
             }
         }
+    }
+
+    /// Whether an equivalent line (same edge, direction and position) is already listed:
+    /// a long line leaves peaks in several neighbouring cells that polish to one line.
+    fn duplicate(&self, c: &Candidate) -> bool {
+        self.list.iter().any(|o| {
+            o.edge == c.edge
+                && wrap_pi(o.psi - c.psi).abs() < DUPLICATE_ANGLE_RAD
+                && (dot(o.normal, sub(c.centroid, o.centroid))).abs() < DUPLICATE_PX
+                && (dot(c.normal, sub(o.centroid, c.centroid))).abs() < DUPLICATE_PX
+        })
     }
 
     /// Builds the support profile of `c` over the part of its line inside the image.

@@ -36,6 +36,9 @@ pub struct Coverage {
     pub visible: f64,
     /// Supported length just past the corner end (should be none).
     pub overshoot: f64,
+    /// Supported length past an open far end (the beam going on towards its clamp
+    /// beyond what the reference showed): evidence, but its absence is no penalty.
+    pub beyond: f64,
 }
 
 impl Coverage {
@@ -48,7 +51,7 @@ impl Coverage {
     }
 
     fn score(&self) -> f64 {
-        2.0 * self.supported - self.visible - 2.0 * self.overshoot
+        2.0 * self.supported - self.visible - 2.0 * self.overshoot + self.beyond
     }
 }
 
@@ -317,10 +320,18 @@ fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate)
     let (supported, visible) = cands.support(c, t_tip + dir * m, t_far - dir * m);
     let zone = 0.3 * length + 2.0;
     let (overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
+    // Capped by the visible part: the beam alone, without its tip in view, is no tip.
+    let beyond = if edge.far_open {
+        let (b, _) = cands.support(c, t_far - dir * m, t_far + dir * 2.0 * length);
+        b.min(visible)
+    } else {
+        0.0
+    };
     Coverage {
         supported,
         visible,
         overshoot,
+        beyond,
     }
 }
 

@@ -23,13 +23,14 @@ const MAX_SAMPLES_PER_EDGE: usize = 2400;
 const ITERATIONS: usize = 8;
 /// Normalisation of the along-edge coordinates (keeps the normal equations balanced).
 const ALONG_UNIT_PX: f64 = 100.0;
-const N_PARAMS: usize = 17;
+const N_PARAMS: usize = 8 + 3 * PHOTO;
 /// Parameter layout.
 const P_TURN: usize = 0; // 3 rotations (only the first in shared mode)
 const P_OFFSET: usize = 3; // 3 offsets
 const P_BEND: usize = 6;
 const P_BLUR: usize = 7;
-const P_PHOTO: usize = 8; // level, slope, contrast per edge
+const P_PHOTO: usize = 8; // per edge: level, level slope, contrast, contrast slope
+const PHOTO: usize = 4;
 
 /// The stretch of one edge to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,12 +81,39 @@ struct Sample {
     y: f32,
     value: f32,
     edge: u8,
+    /// Stretch of the band the pixel belongs to (see [`CHUNKS_PER_EDGE`]).
+    chunk: u8,
 }
 
+/// Each band is cut into at most this many stretches along the edge; a stretch whose
+/// residuals are far above the edge's typical level (a particle sitting on the edge, a
+/// scratch crossing it) is left out of the fit, which a per-pixel robust weight cannot
+/// do when the intruder is only a few noise sigmas bright.
+const CHUNKS_PER_EDGE: usize = 32;
+/// Shortest stretch, pixels along the band's major axis.
+const CHUNK_MIN_LINES: f64 = 10.0;
+/// A stretch is an outlier when its mean squared residual exceeds this many times the
+/// median over the edge's stretches.
+const CHUNK_OUTLIER_RATIO: f64 = 1.7;
+
 /// Reusable buffers of the fit.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Refiner {
     samples: Vec<Sample>,
+    chunk_ok: [bool; 3 * CHUNKS_PER_EDGE],
+    chunk_sq: [f64; 3 * CHUNKS_PER_EDGE],
+    chunk_n: [u32; 3 * CHUNKS_PER_EDGE],
+}
+
+impl Default for Refiner {
+    fn default() -> Self {
+        Refiner {
+            samples: Vec::new(),
+            chunk_ok: [true; 3 * CHUNKS_PER_EDGE],
+            chunk_sq: [0.0; 3 * CHUNKS_PER_EDGE],
+            chunk_n: [0; 3 * CHUNKS_PER_EDGE],
+        }
+    }
 }
 
 /// Per-edge frame of reference during the fit.
@@ -134,11 +162,15 @@ impl Refiner {
         self.init_photometry(&frames, &mut x);
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
+        self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
         for iter in 0..ITERATIONS {
             let ne = self.normal_equations(&frames, &x, &noise, shared);
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
+            if (1..=3).contains(&iter) {
+                self.reject_chunks();
+            }
             let done =
                 step[P_TURN].abs() < 1e-7 && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < 1e-4);
             last = Some(ne);
@@ -168,6 +200,7 @@ impl Refiner {
         let stride = ((lines * per_line) / MAX_SAMPLES_PER_EDGE as f64)
             .ceil()
             .max(1.0) as usize;
+        let chunk_lines = (lines / CHUNKS_PER_EDGE as f64).ceil().max(CHUNK_MIN_LINES);
         let limit = [w, h][j] - 2.0;
         let before = self.samples.len();
         let raw = frame.as_raw();
@@ -181,16 +214,46 @@ impl Refiner {
             for c in c0..=c1 {
                 let (px, py) = if horizontal { (a, c) } else { (c, a) };
                 let value = raw[py as usize * width + px as usize];
+                let local = (((a as f64 - lo) / chunk_lines) as usize).min(CHUNKS_PER_EDGE - 1);
                 self.samples.push(Sample {
                     x: px as f32,
                     y: py as f32,
                     value: value as f32,
                     edge: e as u8,
+                    chunk: (e * CHUNKS_PER_EDGE + local) as u8,
                 });
             }
             a += stride as i64;
         }
         self.samples.len() - before
+    }
+
+    /// Marks the stretches whose residuals stand out from their edge's (see
+    /// [`CHUNKS_PER_EDGE`]); uses the statistics of the last normal equations.
+    fn reject_chunks(&mut self) {
+        for e in 0..3 {
+            let range = e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE;
+            let mut means = [0.0f64; CHUNKS_PER_EDGE];
+            let mut n = 0;
+            for c in range.clone() {
+                if self.chunk_n[c] >= 8 {
+                    means[n] = self.chunk_sq[c] / self.chunk_n[c] as f64;
+                    n += 1;
+                }
+            }
+            if n < 3 {
+                continue;
+            }
+            let means = &mut means[..n];
+            means.sort_by(f64::total_cmp);
+            let median = means[n / 2];
+            for c in range {
+                if self.chunk_n[c] >= 8 {
+                    let mean = self.chunk_sq[c] / self.chunk_n[c] as f64;
+                    self.chunk_ok[c] = mean <= CHUNK_OUTLIER_RATIO * median;
+                }
+            }
+        }
     }
 
     /// Starting levels: mean outside and inside the line, per edge.
@@ -209,19 +272,21 @@ impl Refiner {
         for e in 0..3 {
             let out = acc[e][0] / acc[e][1].max(1.0);
             let inside = acc[e][2] / acc[e][3].max(1.0);
-            x[P_PHOTO + 3 * e] = out;
-            x[P_PHOTO + 3 * e + 2] = inside - out;
+            x[P_PHOTO + PHOTO * e] = out;
+            x[P_PHOTO + PHOTO * e + 2] = inside - out;
         }
     }
 
     fn normal_equations(
-        &self,
+        &mut self,
         frames: &[Option<EdgeFrame>; 3],
         x: &[f64; N_PARAMS],
         noise: &[f64; 3],
         shared: bool,
     ) -> Normal {
         let mut ne = Normal::default();
+        self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
+        self.chunk_n = [0; 3 * CHUNKS_PER_EDGE];
         let mut sq = [0.0f64; 3];
         let mut wsum = [0.0f64; 3];
         let blur = x[P_BLUR];
@@ -244,27 +309,34 @@ impl Refiner {
             let d = dot(n, rel) - x[P_OFFSET + e] - x[P_BEND] * w * w * w;
             let z = d / blur;
             let (cdf, pdf) = (normal_cdf(z), normal_pdf(z));
-            let (level, slope, contrast) = (
-                x[P_PHOTO + 3 * e],
-                x[P_PHOTO + 3 * e + 1],
-                x[P_PHOTO + 3 * e + 2],
-            );
+            let ph = &x[P_PHOTO + PHOTO * e..P_PHOTO + PHOTO * (e + 1)];
             let un = u / ALONG_UNIT_PX;
-            let r = s.value as f64 - (level + slope * un + contrast * cdf);
+            let contrast = ph[2] + ph[3] * un;
+            let r = s.value as f64 - (ph[0] + ph[1] * un + contrast * cdf);
+            let c = s.chunk as usize;
+            self.chunk_sq[c] += r * r;
+            self.chunk_n[c] += 1;
+            if !self.chunk_ok[c] {
+                continue;
+            }
             let k = 1.5 * noise[e];
             let weight = if r.abs() <= k { 1.0 } else { k / r.abs() };
             sq[e] += weight * r * r;
             wsum[e] += weight;
-            let dd = contrast * pdf / blur; // d(model)/d(d)
+            // d(model)/d(d) and d(model)/d(blur).
+            let dd = contrast * pdf / blur;
+            let db = -contrast * pdf * z / blur;
             let turn_index = if shared { P_TURN } else { P_TURN + e };
+            let p0 = P_PHOTO + PHOTO * e;
             let jac = [
                 (turn_index, -dd * u),
                 (P_OFFSET + e, -dd),
                 (P_BEND, -dd * w * w * w),
-                (P_BLUR, -contrast * pdf * z / blur),
-                (P_PHOTO + 3 * e, 1.0),
-                (P_PHOTO + 3 * e + 1, un),
-                (P_PHOTO + 3 * e + 2, cdf),
+                (P_BLUR, db),
+                (p0, 1.0),
+                (p0 + 1, un),
+                (p0 + 2, cdf),
+                (p0 + 3, cdf * un),
             ];
             ne.add(&jac, r, weight);
         }
@@ -275,14 +347,10 @@ impl Refiner {
                 f64::INFINITY
             };
             if frames[e].is_none() {
-                for k in [
-                    P_OFFSET + e,
-                    P_PHOTO + 3 * e,
-                    P_PHOTO + 3 * e + 1,
-                    P_PHOTO + 3 * e + 2,
-                    P_TURN + e,
-                ] {
-                    ne.fixed[k] = true;
+                ne.fixed[P_OFFSET + e] = true;
+                ne.fixed[P_TURN + e] = true;
+                for k in 0..PHOTO {
+                    ne.fixed[P_PHOTO + PHOTO * e + k] = true;
                 }
             }
         }
@@ -292,6 +360,11 @@ impl Refiner {
         }
         if !frames.iter().flatten().any(|f| f.curved) {
             ne.fixed[P_BEND] = true;
+        }
+        if std::env::var("NF_NOCSLOPE").is_ok() {
+            for e in 0..3 {
+                ne.fixed[P_PHOTO + PHOTO * e + 3] = true;
+            }
         }
         ne
     }
@@ -314,8 +387,8 @@ impl Refiner {
             };
             edges[e] = Some(EdgeResult {
                 line,
-                contrast: x[P_PHOTO + 3 * e + 2],
-                level: x[P_PHOTO + 3 * e],
+                contrast: x[P_PHOTO + PHOTO * e + 2],
+                level: x[P_PHOTO + PHOTO * e],
                 noise: ne.noise[e],
                 samples: self.samples.iter().filter(|s| s.edge as usize == e).count(),
                 turn,
@@ -366,7 +439,7 @@ impl Default for Normal {
 }
 
 impl Normal {
-    fn add(&mut self, jac: &[(usize, f64); 7], r: f64, w: f64) {
+    fn add(&mut self, jac: &[(usize, f64); 8], r: f64, w: f64) {
         for &(i, ji) in jac {
             self.g[i] += w * ji * r;
             for &(k, jk) in jac {
@@ -533,5 +606,67 @@ mod tests {
         let p = e.line.foot([100.0, 60.0]);
         assert!(truth.depth(p).abs() < 0.02, "{}", truth.depth(p));
         assert!((e.contrast - 150.0).abs() < 2.0 && (fit.blur - 1.2).abs() < 0.1);
+    }
+}
+
+#[cfg(test)]
+mod debug_refine {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    #[ignore]
+    fn single_band_on_sample() {
+        let f = std::env::var("FRAME").unwrap();
+        let img = image::open(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data/samples")
+                .join(f),
+        )
+        .unwrap()
+        .to_luma8();
+        let v: Vec<f64> = std::env::var("BAND")
+            .unwrap()
+            .split(',')
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let (p0, p1) = ([v[0], v[1]], [v[2], v[3]]);
+        let d = [(p1[0] - p0[0]), (p1[1] - p0[1])];
+        let len = d[0].hypot(d[1]);
+        let mut n = [-d[1] / len, d[0] / len];
+        // Orient the normal to the bright side.
+        let probe = |p: [f64; 2]| img.get_pixel(p[0] as u32, p[1] as u32)[0] as f64;
+        let mid = [0.5 * (p0[0] + p1[0]), 0.5 * (p0[1] + p1[1])];
+        if probe([mid[0] + 4.0 * n[0], mid[1] + 4.0 * n[1]])
+            < probe([mid[0] - 4.0 * n[0], mid[1] - 4.0 * n[1]])
+        {
+            n = [-n[0], -n[1]];
+        }
+        let line = Line::through(p0, n);
+        let band = Band {
+            start: p0,
+            end: p1,
+            line,
+            bend_from: None,
+        };
+        let mut r = Refiner::default();
+        let fit = r.fit(&img, &[None, Some(band), None], false, 1.2).unwrap();
+        let e = fit.edges[1].unwrap();
+        let dd = along(e.line.normal);
+        let mut a = -(dd[1].atan2(dd[0])).to_degrees();
+        while a > 90.0 {
+            a -= 180.0;
+        }
+        while a <= -90.0 {
+            a += 180.0;
+        }
+        println!(
+            "orientation {a:.4} blur {:.2} contrast {:.1} noise {:.1} samples {} rejected {}",
+            fit.blur,
+            e.contrast,
+            e.noise,
+            e.samples,
+            r.chunk_ok.iter().filter(|ok| !**ok).count()
+        );
     }
 }

@@ -24,8 +24,9 @@ use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
 const COHERENT_TOL_RAD: f64 = 0.07;
-/// How much of the beam edge (in tip heights from the free end) is fitted.
-const RED_SPAN_HEIGHTS: f64 = 3.0;
+/// How much of the beam edge (in tip heights from the free end) is fitted: all of it
+/// that is in view, in practice; the bend term takes care of its curvature.
+const RED_SPAN_HEIGHTS: f64 = 60.0;
 /// Shortest band worth fitting, frame pixels.
 const MIN_BAND_PX: f64 = 10.0;
 /// Smallest confidence reported as a detection.
@@ -209,6 +210,15 @@ impl Tracker {
         let coverage = if vis > 0.0 { sup / vis } else { 0.0 };
         let precision = (-(fit.turn_sigma.to_degrees() / 0.3)).exp();
         let confidence = (coverage * precision * (snr_min / 2.0).min(1.0)).clamp(0.0, 1.0);
+        if std::env::var("NF_DEBUG").is_ok() {
+            eprintln!("verdict: coverage {coverage:.3} turn_sigma {:.3} deg snr_min {snr_min:.2} strong {strong}", fit.turn_sigma.to_degrees());
+            for r in fit.edges.iter().flatten() {
+                eprintln!(
+                    "   contrast {:.1} noise {:.1} samples {} level {:.1}",
+                    r.contrast, r.noise, r.samples, r.level
+                );
+            }
+        }
         if strong < 2 || confidence < MIN_CONFIDENCE {
             return Estimate::missed(Miss::LowConfidence, confidence);
         }
@@ -277,7 +287,7 @@ fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64) -> [Option<Band>;
         }
         let dir = scale(sub(far, tip), 1.0 / full);
         let len = if e == RED {
-            full.min(RED_SPAN_HEIGHTS * t.height * pose.scale)
+            RED_SPAN_HEIGHTS * t.height * pose.scale
         } else {
             full
         };
@@ -342,43 +352,126 @@ mod debug_tests {
     #[test]
     #[ignore]
     fn per_edge_turns_on_samples() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/samples/mixed");
+        for name in ["mixed", "sequence"] {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data/samples")
+                .join(name);
+            let cfg = Config::load(&dir.join("probe.toml")).unwrap();
+            let cal_cfg = cfg.tracker.calibration.clone().unwrap();
+            let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
+            let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
+            let mut tr = Tracker::new(&cfg.tracker, cal, None);
+            tr.set_coherence(false);
+            let truth = std::fs::read_to_string(dir.join("truth.csv")).unwrap();
+            for line in truth.lines().skip(1) {
+                let v: Vec<&str> = line.split(',').collect();
+                let f = v[0];
+                let angle: f64 = v[2].parse().unwrap();
+                let frame = image::open(dir.join("frames").join(f)).unwrap().to_luma8();
+                let est = tr.track(&frame);
+                let Some(a) = est.angle_deg else {
+                    println!("{name} {f} {angle:+.3} {} {} missed", v[6], v[8]);
+                    continue;
+                };
+                let t = *tr.calibration.template();
+                let psi = -a.to_radians();
+                let pose = Pose {
+                    psi,
+                    scale: est.scale.unwrap(),
+                    apex: est.apex_px.unwrap(),
+                };
+                let size = [frame.width() as f64, frame.height() as f64];
+                let b = bands(&t, &pose, size, tr.blur);
+                let fit = tr.refiner.fit(&frame, &b, false, tr.blur).unwrap();
+                print!(
+                    "{name} {f} {angle:+8.3} {:5} {:8} joint {:+.3}",
+                    v[6],
+                    v[8],
+                    a - angle
+                );
+                for e in 0..3 {
+                    match fit.edges[e] {
+                        Some(r) => print!(
+                            " e{e} {:+.3} ({:4})",
+                            screen_deg_from_image_rad(psi + r.turn) - angle,
+                            r.samples
+                        ),
+                        None => print!(" e{e}    -          "),
+                    }
+                }
+                println!(" bend {:.2}", fit.bend);
+                if std::env::var("NF_BANDS").is_ok() {
+                    for band in b.iter().flatten() {
+                        println!(
+                            "   band {:.1},{:.1} {:.1},{:.1}",
+                            band.start[0], band.start[1], band.end[0], band.end[1]
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod debug_frame {
+    use super::*;
+    use crate::config::Config;
+    use std::path::Path;
+
+    #[test]
+    #[ignore]
+    fn explain_frame() {
+        let name = std::env::var("SAMPLE").unwrap_or("mixed".into());
+        let frames = std::env::var("FRAMES").unwrap_or("frame_00011.png".into());
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/samples")
+            .join(name);
         let cfg = Config::load(&dir.join("probe.toml")).unwrap();
         let cal_cfg = cfg.tracker.calibration.clone().unwrap();
         let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
         let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
         let mut tr = Tracker::new(&cfg.tracker, cal, None);
-        for f in [
-            "frame_00009.png",
-            "frame_00003.png",
-            "frame_00018.png",
-            "frame_00005.png",
-        ] {
+        tr.set_coherence(false);
+        for f in frames.split(',') {
             let frame = image::open(dir.join("frames").join(f)).unwrap().to_luma8();
             let est = tr.track(&frame);
+            println!("{f}: {est:?}");
+            println!(
+                "  threshold {:.1} noise {:.2} points {}",
+                tr.pyr.threshold(tr.threshold),
+                tr.edges.noise,
+                tr.edges.points.len()
+            );
+            for c in &tr.cands.list {
+                println!(
+                    "  cand e{} psi {:+.2} sigma {:.2} count {} centroid {:.1},{:.1}",
+                    c.edge,
+                    -c.psi.to_degrees(),
+                    c.psi_sigma.to_degrees(),
+                    c.count,
+                    c.centroid[0],
+                    c.centroid[1]
+                );
+            }
             let t = *tr.calibration.template();
-            let psi = -est.angle_deg.unwrap().to_radians();
-            let pose = Pose {
-                psi,
-                scale: est.scale.unwrap(),
-                apex: est.apex_px.unwrap(),
-            };
-            let size = [frame.width() as f64, frame.height() as f64];
-            let b = bands(&t, &pose, size, tr.blur);
-            let fit = tr.refiner.fit(&frame, &b, false, tr.blur).unwrap();
-            print!("{f}: joint {:.4}", est.angle_deg.unwrap());
-            for e in 0..3 {
-                if let Some(r) = fit.edges[e] {
-                    print!(
-                        "  e{e}: {:.4} (n={} c={:.0} noise={:.1})",
-                        screen_deg_from_image_rad(psi + r.turn),
-                        r.samples,
-                        r.contrast,
-                        r.noise
+            if let Some(h) = tr.search.run(&t, &tr.cands, &tr.edges, None) {
+                println!(
+                    "  best: psi {:+.2} scale {:.3} apex {:.1},{:.1} members {:?} score {:.1}",
+                    -h.pose.psi.to_degrees(),
+                    h.pose.scale,
+                    h.pose.apex[0],
+                    h.pose.apex[1],
+                    h.members,
+                    h.score
+                );
+                for c in h.coverage {
+                    println!(
+                        "    cov sup {:.1} vis {:.1} over {:.1}",
+                        c.supported, c.visible, c.overshoot
                     );
                 }
             }
-            println!(" blur {:.2} bend {:.3}", fit.blur, fit.bend);
         }
     }
 }
