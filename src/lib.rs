@@ -22,3 +22,4 @@ pub mod hw;
 pub mod model;
 pub mod scene;
 pub mod sim;
+pub mod vision;
