@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod model;
+pub mod run;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
 #[derive(Debug, Parser)]
@@ -26,6 +27,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run the real-time teleoperation daemon (default: the built-in simulated lab).
+    Run(run::RunArgs),
     Model(model::ModelArgs),
 }
 
@@ -33,6 +36,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
+        Command::Run(args) => run::run(args),
         Command::Model(args) => model::run(args),
     }
 }
