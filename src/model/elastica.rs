@@ -186,9 +186,13 @@ impl Centreline {
         // x: from (L - x)/L-type integral of cos(phi) ds = d(sqrt(s0 - sin phi)).
         let x = ((2.0 * sin).sqrt() - cos * j.sn / j.dn) / self.sqrt_alpha;
         // y: delta/L minus the integral of sin(phi) ds from s to the tip.
+        // The integral is (s0 v - c0^2 sn^3 R_D(cn^2, 1, dn^2) / 6) / sqrt(alpha), written
+        // with sn / sqrt(alpha) ~ 1 - s/L so that nothing underflows at tiny phi0.
+        let sn_scaled = j.sn / self.sqrt_alpha;
+        let alpha = self.sqrt_alpha * self.sqrt_alpha;
         let tail_rd = rd(j.cn * j.cn, 1.0, j.dn * j.dn);
-        let tail = sin * v - cos * cos * j.sn.powi(3) * tail_rd / 6.0;
-        let y = self.delta_over_l - tail / self.sqrt_alpha;
+        let tail = sin * (1.0 - s_over_l) - cos * cos * alpha * sn_scaled.powi(3) * tail_rd / 6.0;
+        let y = self.delta_over_l - tail;
         [x, self.sign * y]
     }
 
