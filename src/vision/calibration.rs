@@ -1,0 +1,457 @@
+//! Calibration: from a reference image and a few clicked pixels per edge to the rigid-tip
+//! template the tracker searches for.
+//!
+//! Clicks are off by up to a pixel, so an orientation taken from them is off by tenths
+//! of a degree. Each edge is therefore (1) located among the reference's edge pixels near
+//! the clicked line, with its polarity (which side is the bright probe), (2) followed
+//! along the edge map to find its extent, and (3) refined on the grey levels with the
+//! same blurred-step model the tracker uses, each edge on its own. The refined lines
+//! give the orientations (so the reference itself reads 0.00 deg), the apex (blue meets
+//! green), and the template: offsets and extents relative to the apex, which do not
+//! depend on magnification or position.
+
+use image::GrayImage;
+
+use super::candidates::angle_gap;
+use super::edges::EdgeMap;
+use super::geometry::{along, dot, norm, screen_deg_from_image_rad, sub, Line};
+use super::pyramid::Pyramid;
+use super::refine::{Band, Refiner};
+use super::template::{Template, TemplateEdge, BLUE, GREEN, RED};
+use super::{Edge, VisionError};
+use crate::config::{CalibrationConfig, TrackerConfig};
+
+/// Largest distance (detection pixels) of the edge pixels used from the clicked line.
+const CLICK_BAND_PX: f64 = 3.0;
+/// Largest gap (detection pixels) bridged when following an edge.
+const MAX_GAP_PX: f64 = 3.0;
+/// Gradient tolerance when following an edge, radians.
+const FOLLOW_ANGLE_RAD: f64 = 0.3;
+/// Initial blur guess for the grey-level fit, pixels.
+pub const BLUR0_PX: f64 = 1.2;
+
+/// One calibrated edge.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibratedEdge {
+    /// Orientation of the refined edge line, degrees CCW on screen, in (-90, 90].
+    pub orientation_deg: f64,
+    /// The same from the clicks alone (for comparison).
+    pub clicked_orientation_deg: f64,
+    /// Refined line; its normal points into the probe.
+    pub line: Line,
+    /// Segment endpoints in the reference: the corner end (apex, or the beam's free end)
+    /// first.
+    pub segment_px: [[f64; 2]; 2],
+    /// Grey-level step across the edge.
+    pub contrast: f64,
+}
+
+/// The calibration of one probe: the refined edges and the template built from them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    edges: [CalibratedEdge; 3],
+    template: Template,
+    image_size: [u32; 2],
+    blur_px: f64,
+}
+
+impl Calibration {
+    /// Refines the clicked edges on the reference image and learns the tip template.
+    pub fn from_reference(
+        reference: &GrayImage,
+        clicks: &CalibrationConfig,
+        cfg: &TrackerConfig,
+    ) -> Result<Calibration, VisionError> {
+        let (w, h) = reference.dimensions();
+        if w < 64 || h < 48 {
+            return Err(VisionError::ImageTooSmall {
+                width: w,
+                height: h,
+            });
+        }
+        let points = [&clicks.red, &clicks.blue, &clicks.green];
+        for (edge, pts) in Edge::ALL.iter().zip(points) {
+            check_clicks(*edge, pts, w, h)?;
+        }
+        let mut pyr = Pyramid::default();
+        pyr.build(reference);
+        let mut map = EdgeMap::default();
+        map.detect(&pyr, pyr.threshold(cfg.threshold));
+        let mut coarse = [None; 3];
+        for (e, pts) in points.iter().enumerate() {
+            coarse[e] = Some(locate(Edge::ALL[e], pts, reference, &pyr, &map)?);
+        }
+        let coarse = coarse.map(|c| c.expect("all three located"));
+        let apex0 = coarse[BLUE]
+            .line
+            .intersect(&coarse[GREEN].line)
+            .ok_or_else(|| VisionError::Degenerate("blue and green are parallel".into()))?;
+        let bands = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
+        let fit = Refiner::default()
+            .fit(reference, &bands, false, BLUR0_PX)
+            .ok_or_else(|| {
+                VisionError::Degenerate("the grey-level fit of the edges failed".into())
+            })?;
+        let mut lines = [coarse[0].line; 3];
+        let mut contrast = [0.0; 3];
+        for e in 0..3 {
+            let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
+                edge: Edge::ALL[e],
+                reason: "too few pixels along the edge".into(),
+            })?;
+            lines[e] = r.line;
+            contrast[e] = r.contrast;
+        }
+        let template = build_template(&lines, &coarse)?;
+        let edges = std::array::from_fn(|e| {
+            let edge = &template.edges[e];
+            let place = |tau| {
+                let q = edge.point(tau);
+                [template.apex[0] + q[0], template.apex[1] + q[1]]
+            };
+            CalibratedEdge {
+                orientation_deg: orientation_deg(&lines[e]),
+                clicked_orientation_deg: orientation_deg(&coarse[e].clicked),
+                line: lines[e],
+                segment_px: [place(edge.tip_tau), place(edge.far_tau)],
+                contrast: contrast[e],
+            }
+        });
+        Ok(Calibration {
+            edges,
+            template,
+            image_size: [w, h],
+            blur_px: fit.blur,
+        })
+    }
+
+    /// The calibrated edge.
+    pub fn edge(&self, edge: Edge) -> &CalibratedEdge {
+        &self.edges[edge.index()]
+    }
+
+    /// The apex (blue meets green) in the reference image, pixels.
+    pub fn apex_px(&self) -> [f64; 2] {
+        self.template.apex
+    }
+
+    /// Size of the reference image.
+    pub fn image_size(&self) -> [u32; 2] {
+        self.image_size
+    }
+
+    /// Blur (Gaussian sigma, pixels) measured on the reference.
+    pub fn blur_px(&self) -> f64 {
+        self.blur_px
+    }
+
+    pub(crate) fn template(&self) -> &Template {
+        &self.template
+    }
+}
+
+/// Orientation of a line's direction, degrees CCW on screen, in (-90, 90].
+fn orientation_deg(line: &Line) -> f64 {
+    let d = along(line.normal);
+    let mut a = screen_deg_from_image_rad(d[1].atan2(d[0]));
+    while a > 90.0 {
+        a -= 180.0;
+    }
+    while a <= -90.0 {
+        a += 180.0;
+    }
+    a
+}
+
+fn check_clicks(edge: Edge, pts: &[[f64; 2]], w: u32, h: u32) -> Result<(), VisionError> {
+    if pts.len() < 2 {
+        return Err(VisionError::EdgeNotFound {
+            edge,
+            reason: format!("needs at least two clicked pixels, got {}", pts.len()),
+        });
+    }
+    for &p in pts {
+        let inside = p[0].is_finite()
+            && p[1].is_finite()
+            && p[0] >= 0.0
+            && p[1] >= 0.0
+            && p[0] <= (w - 1) as f64
+            && p[1] <= (h - 1) as f64;
+        if !inside {
+            return Err(VisionError::ClickOutside {
+                edge,
+                point: p,
+                width: w,
+                height: h,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// An edge located on the edge map: its coarse line (frame pixels) and extent.
+#[derive(Debug, Clone, Copy)]
+struct Located {
+    clicked: Line,
+    line: Line,
+    /// Ends of the followed segment, frame pixels.
+    ends: [[f64; 2]; 2],
+}
+
+/// Finds edge `edge` near its clicks: polarity, then the edge pixels along the clicked
+/// line, then the extent of the run of edge pixels that covers the clicks.
+fn locate(
+    edge: Edge,
+    clicks: &[[f64; 2]],
+    img: &GrayImage,
+    pyr: &Pyramid,
+    map: &EdgeMap,
+) -> Result<Located, VisionError> {
+    let not_found = |reason: &str| VisionError::EdgeNotFound {
+        edge,
+        reason: reason.into(),
+    };
+    let clicked = click_line(clicks, img)
+        .ok_or_else(|| not_found("no brighter side next to the clicked pixels"))?;
+    // Clicks in detection coordinates, and the span they cover along the edge.
+    let d = along(clicked.normal);
+    let det: Vec<[f64; 2]> = clicks.iter().map(|&p| pyr.frame_to_detection(p)).collect();
+    let det_line = Line::through(
+        pyr.frame_to_detection(clicked.foot(clicks[0])),
+        clicked.normal,
+    );
+    let ts: Vec<f64> = det.iter().map(|&p| dot(d, p)).collect();
+    let (t_lo, t_hi) = ts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| {
+            (a.min(t), b.max(t))
+        });
+    let pad = 0.2 * (t_hi - t_lo) + 2.0;
+    let near: Vec<[f64; 2]> = map
+        .points
+        .iter()
+        .map(|p| ([p.x as f64, p.y as f64], p.angle as f64))
+        .filter(|&(q, a)| {
+            det_line.depth(q).abs() <= CLICK_BAND_PX
+                && angle_gap(a, clicked.normal) < 0.35
+                && (t_lo - pad..=t_hi + pad).contains(&dot(d, q))
+        })
+        .map(|(q, _)| q)
+        .collect();
+    if near.len() < 4 {
+        return Err(not_found(
+            "no edge pixels with the right polarity within 3 detection pixels of the clicks",
+        ));
+    }
+    let fitted = fit_points(&near, clicked.normal)
+        .ok_or_else(|| not_found("edge pixels do not form a line"))?;
+    // Follow the edge both ways from the clicks.
+    let angle = fitted.normal[1].atan2(fitted.normal[0]);
+    let start = fitted.foot([
+        0.5 * (det[0][0] + det[det.len() - 1][0]),
+        0.5 * (det[0][1] + det[det.len() - 1][1]),
+    ]);
+    let fd = along(fitted.normal);
+    let mut ends = [[0.0; 2]; 2];
+    for (k, sign) in [-1.0, 1.0].into_iter().enumerate() {
+        let (mut s, mut last, mut gap) = (0.0, 0.0, 0.0);
+        loop {
+            let p = [start[0] + sign * s * fd[0], start[1] + sign * s * fd[1]];
+            if p[0] < 0.0
+                || p[1] < 0.0
+                || p[0] > (map.width - 1) as f64
+                || p[1] > (map.height - 1) as f64
+            {
+                break;
+            }
+            if map.supports(p, fitted.normal, angle, FOLLOW_ANGLE_RAD) {
+                last = s;
+                gap = 0.0;
+            } else {
+                gap += 0.5;
+                if gap > MAX_GAP_PX && s > 0.5 * (t_hi - t_lo) {
+                    break;
+                }
+            }
+            s += 0.5;
+        }
+        ends[k] = pyr.to_frame([
+            start[0] + sign * last * fd[0],
+            start[1] + sign * last * fd[1],
+        ]);
+    }
+    if norm(sub(ends[1], ends[0])) < 6.0 {
+        return Err(not_found("the edge is shorter than 6 pixels"));
+    }
+    let frame_line = Line::through(pyr.to_frame(fitted.foot(start)), fitted.normal);
+    Ok(Located {
+        clicked,
+        line: frame_line,
+        ends,
+    })
+}
+
+/// The line through the clicks, its normal turned towards the brighter side.
+fn click_line(clicks: &[[f64; 2]], img: &GrayImage) -> Option<Line> {
+    let n = clicks.len() as f64;
+    let c = [
+        clicks.iter().map(|p| p[0]).sum::<f64>() / n,
+        clicks.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let normal = fit_points(clicks, [0.0, 1.0])?.normal;
+    let sample = |p: [f64; 2]| -> f64 {
+        let x = p[0].round().clamp(0.0, (img.width() - 1) as f64) as u32;
+        let y = p[1].round().clamp(0.0, (img.height() - 1) as f64) as u32;
+        img.get_pixel(x, y)[0] as f64
+    };
+    let mut diff = 0.0;
+    for &p in clicks {
+        for k in 3..6 {
+            let k = k as f64;
+            diff += sample([p[0] + k * normal[0], p[1] + k * normal[1]])
+                - sample([p[0] - k * normal[0], p[1] - k * normal[1]]);
+        }
+    }
+    diff /= 3.0 * n;
+    if diff.abs() < 8.0 {
+        return None;
+    }
+    let normal = if diff > 0.0 {
+        normal
+    } else {
+        [-normal[0], -normal[1]]
+    };
+    Some(Line::through(c, normal))
+}
+
+/// Total-least-squares line through points, normal oriented like `hint`.
+fn fit_points(pts: &[[f64; 2]], hint: [f64; 2]) -> Option<Line> {
+    let n = pts.len() as f64;
+    if n < 2.0 {
+        return None;
+    }
+    let c = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in pts {
+        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    // Direction = principal axis; normal perpendicular to it.
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let mut normal = [-theta.sin(), theta.cos()];
+    if sxx + syy < 1e-9 {
+        return None;
+    }
+    if dot(normal, hint) < 0.0 {
+        normal = [-normal[0], -normal[1]];
+    }
+    Some(Line::through(c, normal))
+}
+
+/// The stretch of a located edge handed to the grey-level fit: its followed extent,
+/// trimmed away from corners where a neighbouring edge enters the band.
+fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
+    let d = along(loc.line.normal);
+    let (t0, t1) = (dot(d, loc.ends[0]), dot(d, loc.ends[1]));
+    let ta = dot(d, apex);
+    // The corner end is the one nearer the apex (along the edge).
+    let (tc, tf) = if (t0 - ta).abs() < (t1 - ta).abs() {
+        (t0, t1)
+    } else {
+        (t1, t0)
+    };
+    let dir = (tf - tc).signum();
+    let trim_corner = if e == RED { 6.0 } else { 12.0 };
+    let (tc, tf) = (tc + dir * trim_corner, tf - dir * 5.0);
+    let foot = loc.line.foot(apex);
+    let at = |t: f64| [foot[0] + (t - ta) * d[0], foot[1] + (t - ta) * d[1]];
+    Band {
+        start: at(tc),
+        end: at(tf),
+        line: loc.line,
+        bend_from: None,
+    }
+}
+
+/// The template from the refined lines and the followed extents; checks the geometry.
+fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, VisionError> {
+    let degenerate = |m: &str| VisionError::Degenerate(m.into());
+    let (nb, ng) = (lines[BLUE].normal, lines[GREEN].normal);
+    if (nb[0] * ng[1] - nb[1] * ng[0]).abs() < 0.17 {
+        return Err(degenerate(
+            "blue and green are within 10 degrees of parallel: no apex",
+        ));
+    }
+    let apex = lines[BLUE]
+        .intersect(&lines[GREEN])
+        .ok_or_else(|| degenerate("blue and green do not meet"))?;
+    if lines[RED].depth(apex) <= 0.0 {
+        return Err(degenerate(
+            "the apex is not on the probe side of the red edge",
+        ));
+    }
+    let mut edges = [TemplateEdge {
+        normal: [0.0; 2],
+        offset: 0.0,
+        tip_tau: 0.0,
+        far_tau: 0.0,
+        far_open: false,
+    }; 3];
+    for e in 0..3 {
+        let n = lines[e].normal;
+        let d = along(n);
+        let taus = loc[e].ends.map(|p| dot(d, sub(p, apex)));
+        let corner = if e == RED {
+            // The free end is the end of the beam edge nearer the pyramid.
+            if taus[0].abs() < taus[1].abs() {
+                0
+            } else {
+                1
+            }
+        } else if taus[0].abs() < taus[1].abs() {
+            0
+        } else {
+            1
+        };
+        let (tip_tau, far_tau) = (taus[corner], taus[1 - corner]);
+        if e != RED {
+            let length = (far_tau - tip_tau).abs();
+            if tip_tau.abs() > 0.25 * length + 6.0 {
+                return Err(degenerate(&format!(
+                    "the {} edge does not reach the apex (it stops {:.0} px short)",
+                    Edge::ALL[e],
+                    tip_tau.abs()
+                )));
+            }
+        }
+        edges[e] = TemplateEdge {
+            normal: n,
+            offset: lines[e].rho - dot(n, apex),
+            tip_tau: if e == RED { tip_tau } else { 0.0 },
+            far_tau,
+            // The beam goes on to its clamp, whatever the reference showed of it.
+            far_open: e == RED,
+        };
+    }
+    // Each side of the pyramid must have the other on its bright side.
+    let far_point = |e: usize| {
+        let q = edges[e].point(edges[e].far_tau);
+        [apex[0] + q[0], apex[1] + q[1]]
+    };
+    if lines[BLUE].depth(far_point(GREEN)) <= 0.0 || lines[GREEN].depth(far_point(BLUE)) <= 0.0 {
+        return Err(degenerate(
+            "blue and green do not enclose a bright pyramid (check which edge is which)",
+        ));
+    }
+    let height = -edges[RED].offset;
+    Ok(Template {
+        edges,
+        apex,
+        height,
+    })
+}

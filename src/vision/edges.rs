@@ -1,0 +1,233 @@
+//! Canny edges on the detection image, restricted to the bright candidate regions.
+//!
+//! Non-maximum suppression across the gradient, then hysteresis (seeds above a high
+//! threshold grow along pixels above a low one), with both thresholds set from the
+//! measured gradient noise, so "strong edges only" means the same thing on a clean
+//! frame and a noisy one. The grey-level threshold (fixed or Otsu) is applied as a mask:
+//! an edge pixel is kept only if its bright side, a little way up the gradient, is at
+//! least that bright. Every kept pixel remembers its sub-pixel position and gradient
+//! direction, which is what lets the Hough stage check polarity.
+
+use super::geometry::wrap_pi;
+use super::pyramid::Pyramid;
+
+/// Hysteresis thresholds in units of the gradient noise.
+const HIGH_SIGMAS: f32 = 5.0;
+const LOW_SIGMAS: f32 = 2.5;
+/// How far up the gradient (detection pixels) the bright side is sampled.
+const BRIGHT_SIDE_PX: f32 = 2.0;
+
+/// One edge pixel of the detection image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgePoint {
+    /// Sub-pixel position (detection-image coordinates).
+    pub x: f32,
+    pub y: f32,
+    /// Image angle of the gradient, pointing towards the brighter side, radians.
+    pub angle: f32,
+    pub mag: f32,
+}
+
+/// Edge pixels of one frame, plus a per-pixel map of their gradient directions.
+#[derive(Debug, Default)]
+pub struct EdgeMap {
+    pub width: usize,
+    pub height: usize,
+    pub points: Vec<EdgePoint>,
+    /// 0 where there is no edge, else 1 + the gradient direction quantised to 255 steps.
+    pub direction: Vec<u8>,
+    /// Gradient noise (grey levels per detection pixel) the thresholds were set from.
+    pub noise: f32,
+    state: Vec<u8>,
+    stack: Vec<u32>,
+}
+
+const NONE: u8 = 0;
+const WEAK: u8 = 1;
+const STRONG: u8 = 2;
+
+/// Quantises an image angle for [`EdgeMap::direction`].
+pub fn direction_code(angle: f32) -> u8 {
+    let turns = (angle / std::f32::consts::TAU).rem_euclid(1.0);
+    1 + ((turns * 255.0) as u8).min(254)
+}
+
+/// Image angle (radians) of a direction code.
+pub fn code_angle(code: u8) -> f32 {
+    ((code - 1) as f32 + 0.5) / 255.0 * std::f32::consts::TAU
+}
+
+impl EdgeMap {
+    /// Finds the edges of `pyr` whose bright side reaches `threshold`.
+    pub fn detect(&mut self, pyr: &Pyramid, threshold: f32) {
+        let (w, h) = (pyr.width, pyr.height);
+        self.width = w;
+        self.height = h;
+        self.state.clear();
+        self.state.resize(w * h, NONE);
+        self.direction.clear();
+        self.direction.resize(w * h, 0);
+        self.points.clear();
+        self.noise = pyr.gradient_noise();
+        let high = HIGH_SIGMAS * self.noise;
+        let low = LOW_SIGMAS * self.noise;
+        self.suppress(pyr, low, high, threshold);
+        self.hysteresis();
+        self.collect(pyr);
+    }
+
+    /// Non-maximum suppression and the bright-side mask; marks WEAK/STRONG candidates.
+    fn suppress(&mut self, pyr: &Pyramid, low: f32, high: f32, threshold: f32) {
+        let (w, h) = (self.width, self.height);
+        for y in 3..h.saturating_sub(3) {
+            for x in 3..w.saturating_sub(3) {
+                let i = y * w + x;
+                let m = pyr.mag[i];
+                if m < low {
+                    continue;
+                }
+                let (dx, dy) = neighbour_step(pyr.gx[i], pyr.gy[i]);
+                let ahead = (i as isize + dy * w as isize + dx) as usize;
+                let behind = (i as isize - dy * w as isize - dx) as usize;
+                if m < pyr.mag[ahead] || m <= pyr.mag[behind] {
+                    continue;
+                }
+                let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
+                let bx = (x as f32 + BRIGHT_SIDE_PX * ux).round() as usize;
+                let by = (y as f32 + BRIGHT_SIDE_PX * uy).round() as usize;
+                if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
+                    continue;
+                }
+                self.state[i] = if m >= high { STRONG } else { WEAK };
+            }
+        }
+    }
+
+    /// Grows STRONG pixels into connected WEAK ones; whatever stays WEAK is dropped.
+    fn hysteresis(&mut self) {
+        let w = self.width;
+        self.stack.clear();
+        for (i, &s) in self.state.iter().enumerate() {
+            if s == STRONG {
+                self.stack.push(i as u32);
+            }
+        }
+        while let Some(i) = self.stack.pop() {
+            let i = i as usize;
+            for off in [-(w as isize) - 1, -(w as isize), -(w as isize) + 1, -1, 1] {
+                for j in [i as isize + off, i as isize - off] {
+                    let j = j as usize;
+                    if self.state[j] == WEAK {
+                        self.state[j] = STRONG;
+                        self.stack.push(j as u32);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Lists the STRONG pixels with a sub-pixel position across the edge.
+    fn collect(&mut self, pyr: &Pyramid) {
+        let w = self.width;
+        for (i, &s) in self.state.iter().enumerate() {
+            if s != STRONG {
+                continue;
+            }
+            let (x, y) = (i % w, i / w);
+            let (gx, gy, m) = (pyr.gx[i], pyr.gy[i], pyr.mag[i]);
+            let (dx, dy) = neighbour_step(gx, gy);
+            let ahead = pyr.mag[(i as isize + dy * w as isize + dx) as usize];
+            let behind = pyr.mag[(i as isize - dy * w as isize - dx) as usize];
+            let curvature = behind - 2.0 * m + ahead;
+            let offset = if curvature < 0.0 {
+                (0.5 * (behind - ahead) / curvature).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            };
+            let angle = gy.atan2(gx);
+            self.direction[i] = direction_code(angle);
+            self.points.push(EdgePoint {
+                x: x as f32 + offset * dx as f32,
+                y: y as f32 + offset * dy as f32,
+                angle,
+                mag: m,
+            });
+        }
+    }
+}
+
+impl EdgeMap {
+    /// Whether an edge pixel whose gradient is within `tol` of `normal_angle` lies within
+    /// a pixel of `p` across the line of unit normal `normal`.
+    pub fn supports(&self, p: [f64; 2], normal: [f64; 2], normal_angle: f64, tol: f64) -> bool {
+        for k in [-1.0, 0.0, 1.0] {
+            let x = (p[0] + k * normal[0]).round();
+            let y = (p[1] + k * normal[1]).round();
+            if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
+                continue;
+            }
+            let code = self.direction[y as usize * self.width + x as usize];
+            if code != 0 && wrap_pi(code_angle(code) as f64 - normal_angle).abs() < tol {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// The 8-neighbour step closest to the gradient direction.
+fn neighbour_step(gx: f32, gy: f32) -> (isize, isize) {
+    // tan(22.5 deg) = 0.4142
+    let (ax, ay) = (gx.abs(), gy.abs());
+    if ay <= 0.4142 * ax {
+        (1, 0)
+    } else if ax <= 0.4142 * ay {
+        (0, 1)
+    } else if (gx > 0.0) == (gy > 0.0) {
+        (1, 1)
+    } else {
+        (1, -1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{GrayImage, Luma};
+
+    #[test]
+    fn a_bright_disc_gives_a_ring_of_inward_gradients() {
+        let frame = GrayImage::from_fn(640, 480, |x, y| {
+            let r = ((x as f32 - 320.0).powi(2) + (y as f32 - 240.0).powi(2)).sqrt();
+            Luma([if r < 100.0 { 200 } else { 60 }])
+        });
+        let mut pyr = Pyramid::default();
+        pyr.build(&frame);
+        let mut edges = EdgeMap::default();
+        edges.detect(&pyr, 130.0);
+        assert!(edges.points.len() > 250, "{}", edges.points.len());
+        for p in &edges.points {
+            let (cx, cy) = (159.75, 119.75);
+            let r = ((p.x - cx).powi(2) + (p.y - cy).powi(2)).sqrt();
+            assert!((r - 50.0).abs() < 1.5, "{r}");
+            let inward = (cy - p.y).atan2(cx - p.x);
+            let diff = (p.angle - inward).rem_euclid(std::f32::consts::TAU);
+            assert!(
+                !(0.1..=std::f32::consts::TAU - 0.1).contains(&diff),
+                "{diff}"
+            );
+        }
+        // Nothing passes a mask brighter than the disc.
+        edges.detect(&pyr, 230.0);
+        assert!(edges.points.is_empty());
+    }
+
+    #[test]
+    fn direction_codes_round_trip() {
+        for a in [-3.0f32, -1.0, 0.0, 0.5, 3.1] {
+            let back = code_angle(direction_code(a));
+            let diff = (back - a).rem_euclid(std::f32::consts::TAU);
+            assert!(diff.min(std::f32::consts::TAU - diff) < 0.013, "{a} {back}");
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! Plane geometry shared by the tracker: oriented lines, rotations and the one place
+//! where internal angles meet the screen convention.
+//!
+//! Internally every angle is an *image* angle: `atan2(dy, dx)` in pixel coordinates
+//! (x right, y down), so a positive image rotation turns clockwise on screen. Outputs
+//! follow scene.md (degrees, counter-clockwise on screen), converted only by
+//! [`screen_deg_from_image_rad`] and [`image_rad_from_screen_deg`].
+
+/// Screen angle (degrees, CCW on screen) of an image-angle rotation (radians, y down).
+pub fn screen_deg_from_image_rad(angle_rad: f64) -> f64 {
+    -angle_rad.to_degrees()
+}
+
+/// Image angle (radians, y down) of a screen angle (degrees, CCW on screen).
+#[cfg(test)]
+pub fn image_rad_from_screen_deg(angle_deg: f64) -> f64 {
+    -angle_deg.to_radians()
+}
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_pi(angle_rad: f64) -> f64 {
+    let mut a = angle_rad % std::f64::consts::TAU;
+    if a > std::f64::consts::PI {
+        a -= std::f64::consts::TAU;
+    } else if a <= -std::f64::consts::PI {
+        a += std::f64::consts::TAU;
+    }
+    a
+}
+
+/// Unit vector at an image angle.
+#[cfg(test)]
+pub fn unit(angle_rad: f64) -> [f64; 2] {
+    [angle_rad.cos(), angle_rad.sin()]
+}
+
+/// Rotates `v` by an image angle.
+pub fn rotate(v: [f64; 2], angle_rad: f64) -> [f64; 2] {
+    let (s, c) = angle_rad.sin_cos();
+    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+}
+
+pub fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+
+pub fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+pub fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] + b[0], a[1] + b[1]]
+}
+
+pub fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
+    [a[0] * k, a[1] * k]
+}
+
+pub fn norm(a: [f64; 2]) -> f64 {
+    a[0].hypot(a[1])
+}
+
+/// The direction along an edge whose inward normal is `normal`: the normal turned by
+/// -90 degrees (image angle). Fixing it once keeps "along" coordinates consistent.
+pub fn along(normal: [f64; 2]) -> [f64; 2] {
+    [normal[1], -normal[0]]
+}
+
+/// An oriented line `normal . p = rho`; `normal` is unit and points into the probe
+/// (towards the brighter side), so `normal . p - rho` is the signed depth of `p`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Line {
+    pub normal: [f64; 2],
+    pub rho: f64,
+}
+
+impl Line {
+    /// The line through `point` with the given inward normal.
+    pub fn through(point: [f64; 2], normal: [f64; 2]) -> Line {
+        Line {
+            normal,
+            rho: dot(normal, point),
+        }
+    }
+
+    /// Signed distance of `p`, positive on the inner (bright) side.
+    pub fn depth(&self, p: [f64; 2]) -> f64 {
+        dot(self.normal, p) - self.rho
+    }
+
+    /// Image angle of the inward normal.
+    pub fn normal_angle(&self) -> f64 {
+        self.normal[1].atan2(self.normal[0])
+    }
+
+    /// The point of the line closest to `p`.
+    pub fn foot(&self, p: [f64; 2]) -> [f64; 2] {
+        sub(p, scale(self.normal, self.depth(p)))
+    }
+
+    /// Intersection with another line; `None` when nearly parallel.
+    pub fn intersect(&self, other: &Line) -> Option<[f64; 2]> {
+        let det = self.normal[0] * other.normal[1] - self.normal[1] * other.normal[0];
+        if det.abs() < 1e-9 {
+            return None;
+        }
+        let x = (self.rho * other.normal[1] - self.normal[1] * other.rho) / det;
+        let y = (self.normal[0] * other.rho - self.rho * other.normal[0]) / det;
+        Some([x, y])
+    }
+}
+
+/// The part of the line `origin + t * dir` inside the rectangle [lo, hi] (inclusive),
+/// as a `t` interval, or `None` if it misses.
+pub fn clip_to_rect(
+    origin: [f64; 2],
+    dir: [f64; 2],
+    lo: [f64; 2],
+    hi: [f64; 2],
+) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for k in 0..2 {
+        if dir[k].abs() < 1e-12 {
+            if origin[k] < lo[k] || origin[k] > hi[k] {
+                return None;
+            }
+            continue;
+        }
+        let a = (lo[k] - origin[k]) / dir[k];
+        let b = (hi[k] - origin[k]) / dir[k];
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn screen_convention_is_ccw_on_screen() {
+        // A direction pointing right, turned by +10 deg on screen, points up-right:
+        // dy < 0 in pixel coordinates.
+        let d = rotate([1.0, 0.0], image_rad_from_screen_deg(10.0));
+        assert!(d[0] > 0.98 && d[1] < -0.17 && d[1] > -0.18, "{d:?}");
+        assert!((screen_deg_from_image_rad(image_rad_from_screen_deg(7.5)) - 7.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn line_intersection_and_depth() {
+        let a = Line::through([3.0, 4.0], [1.0, 0.0]);
+        let b = Line::through([3.0, 4.0], unit(1.0));
+        let p = a.intersect(&b).unwrap();
+        assert!((p[0] - 3.0).abs() < 1e-12 && (p[1] - 4.0).abs() < 1e-12);
+        assert!((a.depth([5.0, 0.0]) - 2.0).abs() < 1e-12);
+        assert!(a.intersect(&a).is_none());
+        let f = b.foot([10.0, -3.0]);
+        assert!(b.depth(f).abs() < 1e-12);
+    }
+
+    #[test]
+    fn clipping_a_diagonal() {
+        let (t0, t1) = clip_to_rect([0.0, 0.0], [1.0, 1.0], [0.0, 0.0], [9.0, 4.0]).unwrap();
+        assert!((t0 - 0.0).abs() < 1e-12 && (t1 - 4.0).abs() < 1e-12);
+        assert!(clip_to_rect([-5.0, 20.0], [1.0, 0.0], [0.0, 0.0], [9.0, 4.0]).is_none());
+    }
+
+    #[test]
+    fn wrapping() {
+        assert!((wrap_pi(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+        assert!((wrap_pi(-0.5) + 0.5).abs() < 1e-12);
+    }
+}

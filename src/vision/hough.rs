@@ -1,0 +1,257 @@
+//! Polarity-gated Hough line search, one accumulator per tip edge.
+//!
+//! The paper searches each edge's lines on a slope-intercept mesh of points rotated so
+//! that the edge is horizontal, within +-window of its calibrated orientation. Here the
+//! mesh is (psi, rho): psi is the rotation of the tip from the reference (the same for
+//! all three edges), rho the offset of the line along the edge's rotated normal, which
+//! is the same parametrisation without the blow-up of slopes. Two refinements:
+//! - Polarity: the probe is bright, so an edge pixel can belong to edge e only if its
+//!   gradient points along e's inward normal turned by some psi in the window. Each
+//!   pixel then votes only for the few psi its own gradient direction allows, instead
+//!   of all of them: clutter of the wrong direction or polarity casts no vote.
+//! - Peaks are read with a 3-bin rho smoothing and 5x5 non-maximum suppression, and the
+//!   best few per edge are kept as line candidates for the joint rigid-tip search.
+//!   The [1 2 1] smoothing rewards votes that fall in one rho bin, so a line peaks at
+//!   the psi that aligns it best even when the neighbouring psi bins hold its votes too.
+
+use super::edges::EdgePoint;
+use super::geometry::wrap_pi;
+
+/// Width of a psi bin, radians.
+pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
+/// Line candidates kept per edge.
+pub const PEAKS_PER_EDGE: usize = 12;
+/// Fewest (smoothed, so twice the pixel count) votes for a peak.
+const MIN_VOTES: u16 = 10;
+
+/// A local maximum of one edge's accumulator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Peak {
+    pub edge: usize,
+    /// Tip rotation, image radians.
+    pub psi: f64,
+    pub rho: f64,
+    pub votes: u16,
+}
+
+/// Accumulators over (edge, psi, rho) for one detection-image size and window.
+#[derive(Debug, Default)]
+pub struct Hough {
+    n_psi: usize,
+    n_rho: usize,
+    psi_min: f64,
+    rho_min: f64,
+    window_rad: f64,
+    /// Inward normal angles of the three edges in the reference, image radians.
+    normal_angles: [f64; 3],
+    /// cos / sin of (normal angle + psi) per edge and psi bin.
+    cos: Vec<f32>,
+    sin: Vec<f32>,
+    acc: Vec<u16>,
+    smooth: Vec<u16>,
+    pub peaks: Vec<Peak>,
+}
+
+impl Hough {
+    /// Sizes the accumulators; cheap when nothing changed.
+    pub fn configure(
+        &mut self,
+        width: usize,
+        height: usize,
+        window_rad: f64,
+        normal_angles: [f64; 3],
+    ) {
+        let n_psi = 2 * (window_rad / PSI_STEP_RAD).ceil() as usize + 1;
+        let diag = ((width * width + height * height) as f64).sqrt().ceil();
+        let n_rho = 2 * diag as usize + 3;
+        if n_psi == self.n_psi && n_rho == self.n_rho && normal_angles == self.normal_angles {
+            return;
+        }
+        self.n_psi = n_psi;
+        self.n_rho = n_rho;
+        self.psi_min = -((n_psi / 2) as f64) * PSI_STEP_RAD;
+        self.rho_min = -diag - 1.0;
+        self.window_rad = window_rad;
+        self.normal_angles = normal_angles;
+        self.cos.clear();
+        self.sin.clear();
+        for nu in normal_angles {
+            for k in 0..n_psi {
+                let a = nu + self.psi_of(k);
+                self.cos.push(a.cos() as f32);
+                self.sin.push(a.sin() as f32);
+            }
+        }
+        self.acc.clear();
+        self.acc.resize(3 * n_psi * n_rho, 0);
+        self.smooth.clear();
+        self.smooth.resize(3 * n_psi * n_rho, 0);
+        self.peaks.reserve(3 * PEAKS_PER_EDGE);
+    }
+
+    fn psi_of(&self, k: usize) -> f64 {
+        self.psi_min + k as f64 * PSI_STEP_RAD
+    }
+
+    /// Votes every edge point into the accumulators of the edges its polarity allows.
+    /// `noise` is the gradient noise; weaker pixels get a wider direction tolerance.
+    pub fn vote(&mut self, points: &[EdgePoint], noise: f32) {
+        self.acc.iter_mut().for_each(|a| *a = 0);
+        let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        for p in points {
+            let tol = (1.5 * noise / p.mag) as f64 + 1.5f64.to_radians();
+            let tol = tol.clamp(2f64.to_radians(), 8f64.to_radians());
+            for e in 0..3 {
+                let psi = wrap_pi(p.angle as f64 - self.normal_angles[e]);
+                if psi.abs() > self.window_rad + tol {
+                    continue;
+                }
+                let lo = (((psi - tol - self.psi_min) / PSI_STEP_RAD).ceil()).max(0.0) as usize;
+                let hi = (((psi + tol - self.psi_min) / PSI_STEP_RAD).floor() as isize)
+                    .min(n_psi as isize - 1);
+                for k in lo as isize..=hi {
+                    let k = k as usize;
+                    let row = e * n_psi + k;
+                    let rho = p.x * self.cos[row] + p.y * self.sin[row];
+                    let bin = (rho as f64 - self.rho_min).round() as usize;
+                    let cell = &mut self.acc[row * n_rho + bin];
+                    *cell = cell.saturating_add(1);
+                }
+            }
+        }
+    }
+
+    /// Fills `self.peaks` with up to [`PEAKS_PER_EDGE`] best local maxima per edge.
+    pub fn find_peaks(&mut self) {
+        let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        for row in 0..3 * n_psi {
+            let src = &self.acc[row * n_rho..(row + 1) * n_rho];
+            let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
+            dst[0] = 0;
+            dst[n_rho - 1] = 0;
+            for i in 1..n_rho - 1 {
+                dst[i] = src[i - 1]
+                    .saturating_add(src[i].saturating_mul(2))
+                    .saturating_add(src[i + 1]);
+            }
+        }
+        self.peaks.clear();
+        for e in 0..3 {
+            let first = self.peaks.len();
+            for k in 0..n_psi {
+                let row = e * n_psi + k;
+                for i in 2..n_rho - 2 {
+                    let v = self.smooth[row * n_rho + i];
+                    if v < MIN_VOTES || !self.is_local_max(e, k, i, v) {
+                        continue;
+                    }
+                    let peak = Peak {
+                        edge: e,
+                        psi: self.psi_of(k),
+                        rho: self.rho_min + i as f64,
+                        votes: v,
+                    };
+                    insert_top(&mut self.peaks, first, peak);
+                }
+            }
+        }
+    }
+
+    /// Whether cell (e, k, i) with smoothed value v is the maximum of its 5x5
+    /// neighbourhood (ties broken towards the lower index).
+    fn is_local_max(&self, e: usize, k: usize, i: usize, v: u16) -> bool {
+        let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        for kk in k.saturating_sub(2)..(k + 3).min(n_psi) {
+            let row = (e * n_psi + kk) * n_rho;
+            for ii in i - 2..=i + 2 {
+                let w = self.smooth[row + ii];
+                let before = (kk, ii) < (k, i);
+                if w > v || (w == v && before) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+/// Inserts `peak` into the descending list `peaks[first..]`, keeping at most
+/// [`PEAKS_PER_EDGE`] entries there.
+fn insert_top(peaks: &mut Vec<Peak>, first: usize, peak: Peak) {
+    let n = peaks.len() - first;
+    if n == PEAKS_PER_EDGE && peaks[peaks.len() - 1].votes >= peak.votes {
+        return;
+    }
+    let pos = peaks[first..]
+        .iter()
+        .position(|q| q.votes < peak.votes)
+        .map_or(peaks.len(), |p| p + first);
+    if n == PEAKS_PER_EDGE {
+        peaks.pop();
+    }
+    peaks.insert(pos, peak);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line_points(angle_deg: f64, offset: f64, normal_deg: f64, n: usize) -> Vec<EdgePoint> {
+        let a = angle_deg.to_radians();
+        let nrm = normal_deg.to_radians();
+        (0..n)
+            .map(|i| {
+                let t = i as f64 - n as f64 / 2.0;
+                let (x, y) = (100.0 + t * a.cos(), 100.0 + t * a.sin() + offset);
+                EdgePoint {
+                    x: x as f32,
+                    y: y as f32,
+                    angle: nrm as f32,
+                    mag: 50.0,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_rotated_line_peaks_at_its_rotation_and_only_for_its_polarity() {
+        let mut h = Hough::default();
+        // Edge 0: horizontal in the reference, bright below (normal at +90 deg).
+        let normals = [90f64.to_radians(), 0.0, 180f64.to_radians()];
+        h.configure(320, 240, 20f64.to_radians(), normals);
+        // The line turned by +7 deg (image angle): normal at 97 deg.
+        let pts = line_points(7.0, 0.0, 97.0, 80);
+        h.vote(&pts, 1.0);
+        h.find_peaks();
+        let best = h.peaks.iter().find(|p| p.edge == 0).unwrap();
+        assert!((best.psi.to_degrees() - 7.0).abs() <= 1.0, "{best:?}");
+        assert!(best.votes >= 140, "{best:?}");
+        // Edge 1's normal (0 deg) is 97 deg away: no votes at all.
+        assert!(h.peaks.iter().all(|p| p.edge != 1));
+        // Reversed polarity votes for nothing.
+        let flipped = line_points(7.0, 0.0, -83.0, 80);
+        h.vote(&flipped, 1.0);
+        h.find_peaks();
+        assert!(h.peaks.is_empty(), "{:?}", h.peaks);
+    }
+
+    #[test]
+    fn top_list_stays_sorted_and_bounded() {
+        let mut v = Vec::new();
+        let all: Vec<u16> = (0..40u16).map(|i| (i * 37) % 101).collect();
+        for &votes in &all {
+            let peak = Peak {
+                edge: 0,
+                psi: 0.0,
+                rho: 0.0,
+                votes,
+            };
+            insert_top(&mut v, 0, peak);
+        }
+        let got: Vec<u16> = v.iter().map(|p| p.votes).collect();
+        let mut expected = all.clone();
+        expected.sort_by(|a, b| b.cmp(a));
+        expected.truncate(PEAKS_PER_EDGE);
+        assert_eq!(got, expected);
+    }
+}

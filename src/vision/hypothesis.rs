@@ -1,0 +1,366 @@
+//! The rigid-tip search: which combination of line candidates is the tip?
+//!
+//! The tip is rigid, so all its edges turn by one angle psi, and three lines of fixed
+//! directions form a triangle similar to the reference one: the lines' offsets fix the
+//! scale and the apex. Every pair or triple of candidates from different edges whose
+//! rotations agree is a hypothesis; it is placed (psi, scale, apex) and scored by how
+//! well the edge pixels cover the segments the template predicts, minus the uncovered
+//! part and minus any edge continuing past a corner (a clutter line runs on through the
+//! apex; the probe's edges stop there). A clutter line can win an edge's Hough peak,
+//! but not a hypothesis: it would have to agree with the other edges in angle, in
+//! position and in extent. Pairs leave the scale free; it is scanned, and the edge left
+//! out is checked where the template puts it, directly on the edge map.
+
+use super::candidates::{Candidate, Candidates};
+use super::edges::EdgeMap;
+use super::geometry::{clip_to_rect, dot, norm, rotate, sub, wrap_pi};
+use super::template::{Pose, Template};
+
+/// Scale range searched, detection pixels per reference pixel (before binning).
+const SCALE_MIN: f64 = 0.05;
+const SCALE_MAX: f64 = 12.0;
+/// Log step of the scale scan for pairs.
+const SCALE_STEP: f64 = 1.03;
+/// Smallest tip (apex to red line), detection pixels.
+const MIN_HEIGHT_PX: f64 = 10.0;
+/// Hypotheses kept for the full (walking) evaluation.
+const SHORTLIST: usize = 10;
+/// Gradient tolerance when walking a predicted edge, radians.
+const WALK_ANGLE_RAD: f64 = 0.25;
+
+/// Coverage of one edge's predicted segment.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Coverage {
+    /// Supported and visible length of the predicted segment, detection pixels.
+    pub supported: f64,
+    pub visible: f64,
+    /// Supported length just past the corner end (should be none).
+    pub overshoot: f64,
+    /// Supported length past an open far end (the beam going on towards its clamp
+    /// beyond what the reference showed): evidence, but its absence is no penalty.
+    pub beyond: f64,
+}
+
+impl Coverage {
+    pub fn fraction(&self) -> f64 {
+        if self.visible > 0.0 {
+            self.supported / self.visible
+        } else {
+            0.0
+        }
+    }
+
+    fn score(&self) -> f64 {
+        2.0 * self.supported - self.visible - 2.0 * self.overshoot + self.beyond
+    }
+}
+
+/// A placed tip and its evidence.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hypothesis {
+    /// Pose in detection-image coordinates.
+    pub pose: Pose,
+    /// Candidate index per edge (into `Candidates::list`), if the edge was one.
+    pub members: [Option<usize>; 3],
+    pub coverage: [Coverage; 3],
+    pub score: f64,
+}
+
+/// Reusable state of the search.
+#[derive(Debug, Default)]
+pub struct Search {
+    shortlist: Vec<Hypothesis>,
+}
+
+/// Restricts the search (coherence): only rotations within `psi_tol` of `psi`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    pub psi: f64,
+    pub psi_tol: f64,
+}
+
+impl Search {
+    /// The best-scoring hypothesis, if any pair of candidates is compatible.
+    pub fn run(
+        &mut self,
+        template: &Template,
+        cands: &Candidates,
+        edges: &EdgeMap,
+        prior: Option<Prior>,
+    ) -> Option<Hypothesis> {
+        self.shortlist.clear();
+        let list = &cands.list;
+        let n = list.len();
+        let size = [edges.width as f64, edges.height as f64];
+        for i in 0..n {
+            for j in i + 1..n {
+                if list[i].edge == list[j].edge {
+                    continue;
+                }
+                self.consider(template, cands, &[i, j], size, prior);
+                for k in j + 1..n {
+                    let e = [list[i].edge, list[j].edge, list[k].edge];
+                    if e[2] != e[0] && e[2] != e[1] {
+                        self.consider(template, cands, &[i, j, k], size, prior);
+                    }
+                }
+            }
+        }
+        let mut best: Option<Hypothesis> = None;
+        for h in &mut self.shortlist {
+            for e in 0..3 {
+                if h.members[e].is_none() {
+                    h.coverage[e] = walk(template, &h.pose, e, edges);
+                }
+            }
+            h.score = h.coverage.iter().map(Coverage::score).sum();
+            if best.is_none_or(|b| h.score > b.score) {
+                best = Some(*h);
+            }
+        }
+        best
+    }
+
+    /// Places and scores the hypothesis made of candidates `idx`; shortlists it.
+    fn consider(
+        &mut self,
+        t: &Template,
+        cands: &Candidates,
+        idx: &[usize],
+        size: [f64; 2],
+        prior: Option<Prior>,
+    ) {
+        let list = &cands.list;
+        let Some(psi) = common_psi(idx.iter().map(|&i| &list[i])) else {
+            return;
+        };
+        if let Some(p) = prior {
+            if wrap_pi(psi - p.psi).abs() > p.psi_tol {
+                return;
+            }
+        }
+        let mut members = [None; 3];
+        for &i in idx {
+            members[list[i].edge] = Some(i);
+        }
+        let partial = |pose: &Pose| -> Option<([Coverage; 3], f64)> {
+            if !plausible(t, pose, size) {
+                return None;
+            }
+            let mut cov = [Coverage::default(); 3];
+            for (e, m) in members.iter().enumerate() {
+                if let Some(i) = m {
+                    cov[e] = cover(t, pose, e, cands, &list[*i]);
+                }
+            }
+            Some((cov, cov.iter().map(Coverage::score).sum()))
+        };
+        let mut rows = [LineRow::default(); 3];
+        for (r, &i) in rows.iter_mut().zip(idx) {
+            *r = LineRow::new(t, &list[i], psi);
+        }
+        let best = if idx.len() == 3 {
+            solve3(&rows).and_then(|(apex, scale)| {
+                let pose = Pose { psi, scale, apex };
+                partial(&pose).map(|(cov, s)| (pose, cov, s))
+            })
+        } else {
+            scan_scale(&rows[..2], psi, partial)
+        };
+        if let Some((pose, coverage, score)) = best {
+            self.shortlist_insert(Hypothesis {
+                pose,
+                members,
+                coverage,
+                score,
+            });
+        }
+    }
+
+    fn shortlist_insert(&mut self, h: Hypothesis) {
+        if self.shortlist.len() == SHORTLIST {
+            let (worst, w) = self
+                .shortlist
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.score.total_cmp(&b.1.score))
+                .map(|(i, h)| (i, h.score))
+                .unwrap_or((0, f64::INFINITY));
+            if h.score <= w {
+                return;
+            }
+            self.shortlist.swap_remove(worst);
+        }
+        self.shortlist.push(h);
+    }
+}
+
+/// One line of a hypothesis as an equation in the unknown apex and scale:
+/// `normal . apex + scale * offset = rho`.
+#[derive(Debug, Clone, Copy, Default)]
+struct LineRow {
+    normal: [f64; 2],
+    offset: f64,
+    rho: f64,
+}
+
+impl LineRow {
+    /// Candidate `c` turned to the common rotation `psi` about its centroid.
+    fn new(t: &Template, c: &Candidate, psi: f64) -> LineRow {
+        let normal = rotate(t.edges[c.edge].normal, psi);
+        LineRow {
+            normal,
+            offset: t.edges[c.edge].offset,
+            rho: dot(normal, c.centroid),
+        }
+    }
+}
+
+/// Inverse-variance mean of the candidates' rotations, if they agree.
+fn common_psi<'a>(cands: impl Iterator<Item = &'a Candidate> + Clone) -> Option<f64> {
+    let (mut sw, mut swp) = (0.0, 0.0);
+    let reference = cands.clone().next()?.psi;
+    for c in cands.clone() {
+        let w = 1.0 / (c.psi_sigma * c.psi_sigma + 1e-6);
+        sw += w;
+        swp += w * wrap_pi(c.psi - reference);
+    }
+    let psi = reference + swp / sw;
+    for c in cands {
+        let tol = 3.0 * c.psi_sigma + 1.5f64.to_radians();
+        if wrap_pi(c.psi - psi).abs() > tol {
+            return None;
+        }
+    }
+    Some(psi)
+}
+
+/// Apex and scale from three lines (Cramer's rule), if well conditioned.
+fn solve3(r: &[LineRow; 3]) -> Option<([f64; 2], f64)> {
+    let m = r.map(|r| [r.normal[0], r.normal[1], r.offset]);
+    let b = r.map(|r| r.rho);
+    let det3 = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det3(&m);
+    if d.abs() < 1e-6 * r.iter().map(|r| r.offset.abs()).fold(1.0, f64::max) {
+        return None;
+    }
+    let mut x = [0.0; 3];
+    for (k, xk) in x.iter_mut().enumerate() {
+        let mut mk = m;
+        for i in 0..3 {
+            mk[i][k] = b[i];
+        }
+        *xk = det3(&mk) / d;
+    }
+    Some(([x[0], x[1]], x[2]))
+}
+
+/// Two lines leave the scale free: the apex moves along `a0 + scale * a1`. Scans the
+/// scale on a log grid and keeps the best-scoring placement.
+fn scan_scale(
+    r: &[LineRow],
+    psi: f64,
+    score: impl Fn(&Pose) -> Option<([Coverage; 3], f64)>,
+) -> Option<(Pose, [Coverage; 3], f64)> {
+    let det = r[0].normal[0] * r[1].normal[1] - r[0].normal[1] * r[1].normal[0];
+    if det.abs() < 0.05 {
+        return None;
+    }
+    let solve = |b0: f64, b1: f64| {
+        [
+            (b0 * r[1].normal[1] - r[0].normal[1] * b1) / det,
+            (r[0].normal[0] * b1 - b0 * r[1].normal[0]) / det,
+        ]
+    };
+    let a0 = solve(r[0].rho, r[1].rho);
+    let a1 = solve(-r[0].offset, -r[1].offset);
+    let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
+    let mut scale = SCALE_MIN;
+    while scale <= SCALE_MAX {
+        let apex = [a0[0] + scale * a1[0], a0[1] + scale * a1[1]];
+        let pose = Pose { psi, scale, apex };
+        if let Some((cov, s)) = score(&pose) {
+            if best.as_ref().is_none_or(|b| s > b.2 + 1e-9) {
+                best = Some((pose, cov, s));
+            }
+        }
+        scale *= SCALE_STEP;
+    }
+    best
+}
+
+/// Whether a pose could be a tip in this image: big enough to see, and with its apex
+/// no further outside the image than the image is large.
+fn plausible(t: &Template, pose: &Pose, size: [f64; 2]) -> bool {
+    if !(SCALE_MIN..=SCALE_MAX).contains(&pose.scale) || t.height * pose.scale < MIN_HEIGHT_PX {
+        return false;
+    }
+    let [x, y] = pose.apex;
+    x > -size[0] && x < 2.0 * size[0] && y > -size[1] && y < 2.0 * size[1]
+}
+
+/// Margin trimmed off each end of a predicted segment (corners are rounded by blur).
+fn end_margin(length: f64) -> f64 {
+    1.5 + 0.05 * length
+}
+
+/// Coverage of edge `e`'s predicted segment by candidate `c`'s profile.
+fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate) -> Coverage {
+    let edge = &t.edges[e];
+    let (tip, far) = t.segment(pose, e);
+    let length = edge.length() * pose.scale;
+    let t_tip = Candidates::t_of(c, tip);
+    let t_far = Candidates::t_of(c, far);
+    let dir = (t_far - t_tip).signum();
+    let m = end_margin(length);
+    let (supported, visible) = cands.support(c, t_tip + dir * m, t_far - dir * m);
+    let zone = 0.3 * length + 2.0;
+    let (overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
+    // Capped by the visible part: the beam alone, without its tip in view, is no tip.
+    let beyond = if edge.far_open {
+        let (b, _) = cands.support(c, t_far - dir * m, t_far + dir * 2.0 * length);
+        b.min(visible)
+    } else {
+        0.0
+    };
+    Coverage {
+        supported,
+        visible,
+        overshoot,
+        beyond,
+    }
+}
+
+/// Coverage of edge `e`'s predicted segment measured directly on the edge map: used for
+/// the edge a pair hypothesis leaves out.
+fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
+    let line = t.line(pose, e);
+    let normal_angle = line.normal[1].atan2(line.normal[0]);
+    let (tip, far) = t.segment(pose, e);
+    let length = norm(sub(far, tip));
+    if length < 1.0 {
+        return Coverage::default();
+    }
+    let dir = [(far[0] - tip[0]) / length, (far[1] - tip[1]) / length];
+    let hi = [edges.width as f64 - 1.0, edges.height as f64 - 1.0];
+    let Some((a, b)) = clip_to_rect(tip, dir, [0.0, 0.0], hi) else {
+        return Coverage::default();
+    };
+    let m = end_margin(length);
+    let (a, b) = (a.max(m), b.min(length - m));
+    let mut cov = Coverage::default();
+    let mut s = a;
+    while s < b {
+        let p = [tip[0] + s * dir[0], tip[1] + s * dir[1]];
+        cov.visible += 1.0;
+        if edges.supports(p, line.normal, normal_angle, WALK_ANGLE_RAD) {
+            cov.supported += 1.0;
+        }
+        s += 1.0;
+    }
+    cov
+}

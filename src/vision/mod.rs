@@ -1,0 +1,160 @@
+//! Vision: finds the AFM probe's rigid pyramid tip in an SEM frame and measures its
+//! rotation from the reference image, the quantity the elastica turns into a force.
+//!
+//! The pipeline starts from the paper's (threshold, Canny, one Hough line search per tip
+//! edge within +-window of its calibrated orientation) and goes beyond it:
+//! - `pyramid`: the frame binned to ~320 px wide for detection (cost and noise down);
+//! - `edges`: Canny on that image, masked by the grey-level threshold (fixed or Otsu);
+//! - `hough`: per-edge (psi, rho) accumulators, where a pixel votes only for rotations
+//!   its gradient direction allows (the probe is bright: edges have a polarity);
+//! - `candidates`: the best peaks polished into lines with support profiles;
+//! - `hypothesis`: the rigid-tip search: pairs and triples of lines that agree on one
+//!   rotation and form the reference triangle at some scale, scored by how well they
+//!   cover the predicted segments (a clutter line cannot win an edge on its own);
+//! - `refine`: sub-pixel, sub-0.1 degree fit of one shared rotation on the full-resolution
+//!   grey levels, with a bend term for the curved beam edge;
+//! - `tracker`: the per-frame driver, verification, confidence and coherence;
+//! - `calibration`: the template learned from the reference image and clicked pixels;
+//! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
+//!
+//! Conventions are scene.md's: pixels x right, y down, origin at the top-left pixel's
+//! centre; output angles in degrees, counter-clockwise on screen.
+
+mod calibration;
+mod candidates;
+mod edges;
+mod geometry;
+mod hough;
+mod hypothesis;
+mod overlay;
+mod pyramid;
+mod refine;
+mod template;
+mod tracker;
+
+use std::fmt;
+
+pub use calibration::{CalibratedEdge, Calibration};
+pub use geometry::Line;
+pub use overlay::{draw_calibration, draw_overlay};
+pub use tracker::Tracker;
+
+/// The three tracked edges of the tip (the paper's red, blue and green lines).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Edge {
+    /// The beam's upper face near the free end.
+    Red,
+    /// The pyramid's back face, from its base to the apex.
+    Blue,
+    /// The pyramid's front face, from the apex back to the beam.
+    Green,
+}
+
+impl Edge {
+    pub const ALL: [Edge; 3] = [Edge::Red, Edge::Blue, Edge::Green];
+
+    /// Position in per-edge arrays such as [`Estimate::edges`].
+    pub fn index(self) -> usize {
+        match self {
+            Edge::Red => template::RED,
+            Edge::Blue => template::BLUE,
+            Edge::Green => template::GREEN,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Edge::Red => "red",
+            Edge::Blue => "blue",
+            Edge::Green => "green",
+        }
+    }
+}
+
+impl fmt::Display for Edge {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One tip edge as found in a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeFit {
+    /// Visible part of the edge segment, frame pixels: corner end (apex or free end)
+    /// first when it is in view.
+    pub start_px: [f64; 2],
+    pub end_px: [f64; 2],
+    /// Edge pixels (detection image) supporting it.
+    pub support: u32,
+    /// Grey-level step across the edge.
+    pub contrast: f64,
+}
+
+/// Why a frame gave no estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Miss {
+    /// Too few edge candidates of the tip's polarity and orientation.
+    NoCandidates,
+    /// Candidates exist, but none combine into a rigid tip.
+    Inconsistent,
+    /// A tip-like hypothesis was found but did not pass verification.
+    LowConfidence,
+}
+
+/// What the tracker reports for one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub detected: bool,
+    /// Tip rotation from the reference, degrees CCW on screen.
+    pub angle_deg: Option<f64>,
+    /// Tip force through the cantilever model, nN (sign of the angle).
+    pub force_nn: Option<f64>,
+    /// The angle is beyond the model's table: the force is clamped.
+    pub force_saturated: bool,
+    /// Apex (blue meets green), frame pixels; predicted from the rigid tip when one of
+    /// the two is out of view.
+    pub apex_px: Option<[f64; 2]>,
+    /// Per edge, indexed by [`Edge::index`].
+    pub edges: [Option<EdgeFit>; 3],
+    /// Frame pixels per reference pixel.
+    pub scale: Option<f64>,
+    /// In [0, 1]; `detected` requires it to pass the tracker's threshold.
+    pub confidence: f64,
+    /// Set when `detected` is false.
+    pub miss: Option<Miss>,
+}
+
+impl Estimate {
+    /// A frame without a usable tip.
+    pub fn missed(miss: Miss, confidence: f64) -> Estimate {
+        Estimate {
+            detected: false,
+            angle_deg: None,
+            force_nn: None,
+            force_saturated: false,
+            apex_px: None,
+            edges: [None; 3],
+            scale: None,
+            confidence,
+            miss: Some(miss),
+        }
+    }
+}
+
+/// Bad calibration input (reading the image is the caller's job).
+#[derive(Debug, thiserror::Error)]
+pub enum VisionError {
+    #[error("calibration: the reference image is {width}x{height}; at least 64x48 is needed")]
+    ImageTooSmall { width: u32, height: u32 },
+    #[error("calibration: {edge} click {point:?} is outside the {width}x{height} reference image")]
+    ClickOutside {
+        edge: Edge,
+        point: [f64; 2],
+        width: u32,
+        height: u32,
+    },
+    #[error("calibration: {edge} edge not found near its clicks: {reason}")]
+    EdgeNotFound { edge: Edge, reason: String },
+    #[error("calibration: degenerate tip geometry: {0}")]
+    Degenerate(String),
+}

@@ -1,0 +1,61 @@
+//! Pictures for people: the frame with the found edges drawn in red, blue and green and
+//! the apex marked (the paper's Figure 8), and the same for a calibration on its
+//! reference image. Not used in the hot path.
+
+use image::{GrayImage, Rgb, RgbImage};
+use imageproc::drawing::{draw_hollow_circle_mut, draw_line_segment_mut};
+
+use super::{Calibration, Edge, Estimate};
+
+const COLOURS: [Rgb<u8>; 3] = [Rgb([255, 40, 40]), Rgb([60, 110, 255]), Rgb([40, 220, 60])];
+const APEX: Rgb<u8> = Rgb([255, 230, 0]);
+
+/// The frame in colour with the estimate's edges and apex drawn over it.
+pub fn draw_overlay(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
+    let mut out = to_rgb(frame);
+    for e in Edge::ALL {
+        if let Some(fit) = &estimate.edges[e.index()] {
+            thick_segment(&mut out, fit.start_px, fit.end_px, COLOURS[e.index()]);
+        }
+    }
+    if let Some(apex) = estimate.apex_px {
+        mark(&mut out, apex);
+    }
+    out
+}
+
+/// The reference image with the calibrated edge segments and the apex.
+pub fn draw_calibration(reference: &GrayImage, calibration: &Calibration) -> RgbImage {
+    let mut out = to_rgb(reference);
+    for e in Edge::ALL {
+        let seg = calibration.edge(e).segment_px;
+        thick_segment(&mut out, seg[0], seg[1], COLOURS[e.index()]);
+    }
+    mark(&mut out, calibration.apex_px());
+    out
+}
+
+fn to_rgb(frame: &GrayImage) -> RgbImage {
+    RgbImage::from_fn(frame.width(), frame.height(), |x, y| {
+        let g = frame.get_pixel(x, y)[0];
+        Rgb([g, g, g])
+    })
+}
+
+/// A 2-pixel-wide segment.
+fn thick_segment(img: &mut RgbImage, a: [f64; 2], b: [f64; 2], colour: Rgb<u8>) {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len = dx.hypot(dy).max(1e-9);
+    let (nx, ny) = (-dy / len * 0.5, dx / len * 0.5);
+    for k in [-1.0, 1.0] {
+        let start = ((a[0] + k * nx) as f32, (a[1] + k * ny) as f32);
+        let end = ((b[0] + k * nx) as f32, (b[1] + k * ny) as f32);
+        draw_line_segment_mut(img, start, end, colour);
+    }
+}
+
+fn mark(img: &mut RgbImage, p: [f64; 2]) {
+    let c = (p[0].round() as i32, p[1].round() as i32);
+    draw_hollow_circle_mut(img, c, 5, APEX);
+    draw_hollow_circle_mut(img, c, 6, APEX);
+}

@@ -1,0 +1,231 @@
+//! The coarse detection image: the frame binned k x k (k chosen so the detection image
+//! is about 320 pixels wide whatever the frame size), its histogram threshold, and its
+//! smoothed gradient.
+//!
+//! Binning cuts the cost of every detection stage by k^2 and the noise by k; the
+//! gradient is a 5x5 separable derivative-of-binomial (Sobel on a [1 2 1]-smoothed
+//! image), normalised to grey levels per binned pixel. Full resolution is used again
+//! only along the edges that detection finds (see `refine`).
+
+use image::GrayImage;
+
+use crate::config::Threshold;
+
+/// Target width of the detection image, pixels.
+const DETECTION_WIDTH: u32 = 320;
+
+/// A binned frame and its gradient, reused from frame to frame.
+#[derive(Debug, Default)]
+pub struct Pyramid {
+    /// Binning factor: one detection pixel covers `factor x factor` frame pixels.
+    pub factor: u32,
+    pub width: usize,
+    pub height: usize,
+    /// Mean grey level of each bin.
+    pub grey: Vec<f32>,
+    /// Gradient components, grey levels per detection pixel; zero on a 2-pixel border.
+    pub gx: Vec<f32>,
+    pub gy: Vec<f32>,
+    pub mag: Vec<f32>,
+    scratch_a: Vec<f32>,
+    scratch_b: Vec<f32>,
+}
+
+/// The binning factor used for a frame `width` pixels wide.
+pub fn binning_factor(width: u32) -> u32 {
+    (width / DETECTION_WIDTH).max(1)
+}
+
+impl Pyramid {
+    /// Bins `frame` and computes its gradient. Allocates only when the size changes.
+    pub fn build(&mut self, frame: &GrayImage) {
+        let factor = binning_factor(frame.width());
+        let width = (frame.width() / factor) as usize;
+        let height = (frame.height() / factor) as usize;
+        self.factor = factor;
+        self.width = width;
+        self.height = height;
+        for buf in [
+            &mut self.grey,
+            &mut self.gx,
+            &mut self.gy,
+            &mut self.mag,
+            &mut self.scratch_a,
+            &mut self.scratch_b,
+        ] {
+            buf.resize(width * height, 0.0);
+        }
+        bin_into(frame, factor as usize, width, height, &mut self.grey);
+        self.gradient();
+    }
+
+    /// Frame coordinates of the centre of detection pixel (x, y).
+    pub fn to_frame(&self, p: [f64; 2]) -> [f64; 2] {
+        let k = self.factor as f64;
+        [k * p[0] + 0.5 * (k - 1.0), k * p[1] + 0.5 * (k - 1.0)]
+    }
+
+    /// Detection-image coordinates of frame point `p`.
+    pub fn frame_to_detection(&self, p: [f64; 2]) -> [f64; 2] {
+        let k = self.factor as f64;
+        [(p[0] - 0.5 * (k - 1.0)) / k, (p[1] - 0.5 * (k - 1.0)) / k]
+    }
+
+    /// The grey level separating bright candidate regions from the rest, on the binned
+    /// image: the configured level, or Otsu's threshold of its histogram.
+    pub fn threshold(&self, threshold: Threshold) -> f32 {
+        match threshold {
+            Threshold::Level(level) => level as f32,
+            Threshold::Otsu => {
+                let mut hist = [0u32; 256];
+                for &g in &self.grey {
+                    hist[g.clamp(0.0, 255.0) as usize] += 1;
+                }
+                otsu(&hist) as f32 + 0.5
+            }
+        }
+    }
+
+    /// Robust estimate of the gradient-magnitude noise: the median magnitude of a
+    /// pure-noise gradient is 1.1774 times the per-component standard deviation, and
+    /// most of a frame is flat.
+    pub fn gradient_noise(&self) -> f32 {
+        let mut hist = [0u32; 512];
+        let bin = 0.25f32;
+        for &m in &self.mag {
+            hist[((m / bin) as usize).min(511)] += 1;
+        }
+        let half = (self.mag.len() / 2) as u32;
+        let mut acc = 0;
+        for (i, &h) in hist.iter().enumerate() {
+            acc += h;
+            if acc >= half {
+                return ((i as f32 + 0.5) * bin / 1.1774).max(0.25);
+            }
+        }
+        511.0 * bin
+    }
+
+    fn gradient(&mut self) {
+        let (w, h) = (self.width, self.height);
+        let (deriv_x, smooth_x) = (&mut self.scratch_a, &mut self.scratch_b);
+        // Horizontal pass: derivative [-1 -2 0 2 1] and smoothing [1 4 6 4 1].
+        for y in 0..h {
+            let row = &self.grey[y * w..(y + 1) * w];
+            for x in 2..w.saturating_sub(2) {
+                let (a, b, c, d, e) = (row[x - 2], row[x - 1], row[x], row[x + 1], row[x + 2]);
+                deriv_x[y * w + x] = 2.0 * (d - b) + (e - a);
+                smooth_x[y * w + x] = a + e + 4.0 * (b + d) + 6.0 * c;
+            }
+        }
+        // Vertical pass; 1/128 makes both components grey levels per pixel.
+        let norm = 1.0 / 128.0;
+        for v in [&mut self.gx, &mut self.gy, &mut self.mag] {
+            v.iter_mut().for_each(|g| *g = 0.0);
+        }
+        for y in 2..h.saturating_sub(2) {
+            for x in 2..w.saturating_sub(2) {
+                let at = |buf: &[f32], dy: isize| buf[(y as isize + dy) as usize * w + x];
+                let gx = at(deriv_x, -2)
+                    + at(deriv_x, 2)
+                    + 4.0 * (at(deriv_x, -1) + at(deriv_x, 1))
+                    + 6.0 * at(deriv_x, 0);
+                let gy =
+                    2.0 * (at(smooth_x, 1) - at(smooth_x, -1)) + at(smooth_x, 2) - at(smooth_x, -2);
+                let i = y * w + x;
+                self.gx[i] = gx * norm;
+                self.gy[i] = gy * norm;
+                self.mag[i] = (gx * gx + gy * gy).sqrt() * norm;
+            }
+        }
+    }
+}
+
+/// Mean of each `factor x factor` block of `frame` into `out` (row-major, `width` wide).
+fn bin_into(frame: &GrayImage, factor: usize, width: usize, height: usize, out: &mut [f32]) {
+    let stride = frame.width() as usize;
+    let raw: &[u8] = frame.as_raw();
+    let inv = 1.0 / (factor * factor) as f32;
+    let mut sums = [0u32; 1024];
+    let sums = &mut sums[..width.min(1024)];
+    for by in 0..height {
+        sums.iter_mut().for_each(|s| *s = 0);
+        for dy in 0..factor {
+            let row = &raw[(by * factor + dy) * stride..];
+            for (bx, s) in sums.iter_mut().enumerate() {
+                let px = &row[bx * factor..bx * factor + factor];
+                *s += px.iter().map(|&v| v as u32).sum::<u32>();
+            }
+        }
+        for (o, &s) in out[by * width..(by + 1) * width]
+            .iter_mut()
+            .zip(sums.iter())
+        {
+            *o = s as f32 * inv;
+        }
+    }
+}
+
+/// Otsu's threshold of a 256-bin histogram: the level maximising the between-class
+/// variance (pixels `<= level` form the dark class).
+pub fn otsu(hist: &[u32; 256]) -> u8 {
+    let total: f64 = hist.iter().map(|&h| h as f64).sum();
+    let sum_all: f64 = hist
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| i as f64 * h as f64)
+        .sum();
+    let (mut w0, mut sum0, mut best, mut best_level) = (0.0, 0.0, -1.0, 0u8);
+    for (level, &h) in hist.iter().enumerate() {
+        w0 += h as f64;
+        sum0 += level as f64 * h as f64;
+        let w1 = total - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let diff = sum0 / w0 - (sum_all - sum0) / w1;
+        let between = w0 * w1 * diff * diff;
+        if between > best {
+            best = between;
+            best_level = level as u8;
+        }
+    }
+    best_level
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn otsu_splits_two_modes() {
+        let mut hist = [0u32; 256];
+        hist[60] = 1000;
+        hist[61] = 800;
+        hist[200] = 300;
+        let t = otsu(&hist);
+        assert!((61..200).contains(&t), "{t}");
+    }
+
+    #[test]
+    fn gradient_of_a_ramp_is_its_slope() {
+        // Grey level 3 per frame pixel along x: 6 per detection pixel at factor 2.
+        let frame = GrayImage::from_fn(640, 480, |x, _| image::Luma([(x as f32 * 0.3) as u8]));
+        let mut p = Pyramid::default();
+        p.build(&frame);
+        assert_eq!((p.factor, p.width, p.height), (2, 320, 240));
+        let i = 100 * p.width + 100;
+        assert!((p.gx[i] - 0.6).abs() < 0.05, "{}", p.gx[i]);
+        assert!(p.gy[i].abs() < 1e-4);
+        // Detection pixel 100 covers frame pixels 200 and 201: centre 200.5.
+        assert_eq!(p.to_frame([100.0, 0.0])[0], 200.5);
+        assert_eq!(p.frame_to_detection([200.5, 0.5]), [100.0, 0.0]);
+    }
+
+    #[test]
+    fn large_frames_bin_to_the_same_detection_size() {
+        assert_eq!(binning_factor(1280), 4);
+        assert_eq!(binning_factor(640), 2);
+        assert_eq!(binning_factor(300), 1);
+    }
+}

@@ -1,0 +1,166 @@
+//! The rigid-tip template learned from the reference image, in a form that does not
+//! depend on where the tip is or how large it appears.
+//!
+//! Everything is measured from the apex (blue meets green) in reference pixels: each
+//! edge's inward normal, the offset of its line from the apex, and the extent of its
+//! segment along it. A frame sees the template through a similarity: rotation `psi`
+//! (the tip angle), scale `s` (the magnification ratio) and the apex position. The
+//! three lines of fixed directions always form a triangle similar to the reference
+//! one, so the offsets fix `s` and the apex; the segment extents say where each edge
+//! must be supported (and where it must end) for a hypothesis to be the tip.
+
+use super::geometry::{add, along, dot, rotate, scale, Line};
+
+/// Indices of the three tracked edges, in the order used by every array here.
+pub const RED: usize = 0;
+pub const BLUE: usize = 1;
+pub const GREEN: usize = 2;
+
+/// One edge of the template.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TemplateEdge {
+    /// Inward (towards the bright probe) unit normal in the reference, image coordinates.
+    pub normal: [f64; 2],
+    /// Signed offset of the line from the apex: `normal . (p - apex)` on the line.
+    pub offset: f64,
+    /// Position along `along(normal)` (from the apex's foot on the line) of the segment
+    /// end at the corner: the apex for blue and green, the beam's free end for red.
+    pub tip_tau: f64,
+    /// Position of the other end: the pyramid's base, or for red where the beam left the
+    /// reference frame.
+    pub far_tau: f64,
+    /// Whether the far end is open (the edge went on out of the reference frame).
+    pub far_open: bool,
+}
+
+impl TemplateEdge {
+    /// Length of the segment in the reference, pixels.
+    pub fn length(&self) -> f64 {
+        (self.far_tau - self.tip_tau).abs()
+    }
+
+    /// The point at `tau` along the edge, relative to the apex (reference pixels).
+    pub fn point(&self, tau: f64) -> [f64; 2] {
+        add(
+            scale(self.normal, self.offset),
+            scale(along(self.normal), tau),
+        )
+    }
+}
+
+/// The tip as the reference image shows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Template {
+    pub edges: [TemplateEdge; 3],
+    /// Apex in the reference image, pixels.
+    pub apex: [f64; 2],
+    /// Distance from the apex to the red line: the pyramid's height plus the beam's
+    /// thickness, the natural unit of the tip's size.
+    pub height: f64,
+}
+
+/// Where the template sits in a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// Tip rotation from the reference, image radians.
+    pub psi: f64,
+    /// Frame pixels per reference pixel.
+    pub scale: f64,
+    /// Apex, frame pixels.
+    pub apex: [f64; 2],
+}
+
+impl Template {
+    /// Frame position of template point `q` (relative to the apex, reference pixels).
+    pub fn place(&self, pose: &Pose, q: [f64; 2]) -> [f64; 2] {
+        add(pose.apex, scale(rotate(q, pose.psi), pose.scale))
+    }
+
+    /// Edge `e`'s line in a frame.
+    pub fn line(&self, pose: &Pose, e: usize) -> Line {
+        let edge = &self.edges[e];
+        let normal = rotate(edge.normal, pose.psi);
+        Line {
+            normal,
+            rho: dot(normal, pose.apex) + pose.scale * edge.offset,
+        }
+    }
+
+    /// Edge `e`'s segment in a frame: (tip end, far end).
+    pub fn segment(&self, pose: &Pose, e: usize) -> ([f64; 2], [f64; 2]) {
+        let edge = &self.edges[e];
+        (
+            self.place(pose, edge.point(edge.tip_tau)),
+            self.place(pose, edge.point(edge.far_tau)),
+        )
+    }
+
+    /// Inward normal angles (image radians) of the three edges in the reference.
+    pub fn normal_angles(&self) -> [f64; 3] {
+        self.edges.map(|e| e.normal[1].atan2(e.normal[0]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn toy() -> Template {
+        // Red horizontal 50 px above the apex (bright below), blue and green at +-30 deg.
+        let n_red = [0.0, 1.0];
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let n_blue = [c, -s];
+        let n_green = [-c, -s];
+        let edge = |normal, offset, tip_tau, far_tau| TemplateEdge {
+            normal,
+            offset,
+            tip_tau,
+            far_tau,
+            far_open: false,
+        };
+        Template {
+            edges: [
+                edge(n_red, -50.0, 40.0, -200.0),
+                edge(n_blue, 0.0, 0.0, 50.0),
+                edge(n_green, 0.0, 0.0, -50.0),
+            ],
+            apex: [100.0, 100.0],
+            height: 50.0,
+        }
+    }
+
+    #[test]
+    fn identity_pose_reproduces_the_reference() {
+        let t = toy();
+        let pose = Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: t.apex,
+        };
+        let red = t.line(&pose, RED);
+        assert!((red.depth([0.0, 50.0])).abs() < 1e-12);
+        assert!(red.depth(t.apex) > 0.0, "apex is on the probe side of red");
+        let (tip, _) = t.segment(&pose, BLUE);
+        assert!((tip[0] - 100.0).abs() < 1e-12 && (tip[1] - 100.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn lines_follow_rotation_and_scale() {
+        let t = toy();
+        let pose = Pose {
+            psi: 0.3,
+            scale: 2.0,
+            apex: [10.0, 20.0],
+        };
+        for e in 0..3 {
+            let line = t.line(&pose, e);
+            let edge = &t.edges[e];
+            for tau in [edge.tip_tau, edge.far_tau] {
+                let p = t.place(&pose, edge.point(tau));
+                assert!(line.depth(p).abs() < 1e-9);
+            }
+        }
+        let red = t.line(&pose, RED);
+        assert!((red.depth(pose.apex) - 100.0).abs() < 1e-9);
+    }
+}

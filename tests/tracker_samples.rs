@@ -1,0 +1,42 @@
+//! The tracker on the two public sample sessions, scored against their truth.
+mod tracker_support;
+
+use tracker_support::{sample, score, table};
+
+#[test]
+fn debug_samples() {
+    for name in ["mixed", "sequence"] {
+        let s = sample(name);
+        let cal = s.calibrate();
+        for e in nanoforce::vision::Edge::ALL {
+            let c = cal.edge(e);
+            println!(
+                "{name} {e}: {:.3} (clicked {:.3}) seg {:?} contrast {:.1}",
+                c.orientation_deg, c.clicked_orientation_deg, c.segment_px, c.contrast
+            );
+        }
+        println!("apex {:?} blur {:.2}", cal.apex_px(), cal.blur_px());
+        let est = s.run(false);
+        println!("{}", table(&s.truth, &est));
+        println!("{name}: {:?}", score(&s.truth, &est));
+    }
+}
+
+#[test]
+fn debug_scale() {
+    for name in ["mixed", "sequence"] {
+        let s = sample(name);
+        let est = s.run(false);
+        for (t, e) in s.truth.iter().zip(&est) {
+            if let Some(sc) = e.scale {
+                println!(
+                    "{name} {} mag {} scale {:.4} -> ref mag {:.1}",
+                    t.frame,
+                    t.magnification,
+                    sc,
+                    t.magnification / sc
+                );
+            }
+        }
+    }
+}

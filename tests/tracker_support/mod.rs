@@ -1,0 +1,231 @@
+//! Test-only scoring helpers shared by the tracker tests: read a session (config,
+//! reference, frames, truth), run a tracker over it, and score the estimates the way
+//! `score.py` does (detection rate, false detections, angle error median / p95 / max,
+//! apex error median).
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use image::GrayImage;
+use nanoforce::config::Config;
+use nanoforce::vision::{Calibration, Estimate, Tracker};
+
+/// One row of a truth.csv.
+#[derive(Debug, Clone)]
+pub struct Truth {
+    pub frame: String,
+    pub detected: bool,
+    pub angle_deg: f64,
+    pub force_nn: f64,
+    pub tip: [f64; 2],
+    pub magnification: f64,
+    pub style: String,
+}
+
+pub fn read_truth(path: &Path) -> Vec<Truth> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (f, d, a, fo, tx, ty, m, s) = (
+        col("frame"),
+        col("detected"),
+        col("angle_deg"),
+        col("force_nN"),
+        col("tip_x"),
+        col("tip_y"),
+        col("magnification"),
+        col("style"),
+    );
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            let num = |i: usize| v[i].parse::<f64>().unwrap_or(f64::NAN);
+            Truth {
+                frame: v[f].to_string(),
+                detected: v[d] == "1",
+                angle_deg: num(a),
+                force_nn: num(fo),
+                tip: [num(tx), num(ty)],
+                magnification: num(m),
+                style: v[s].to_string(),
+            }
+        })
+        .collect()
+}
+
+/// A recorded session on disk.
+pub struct Session {
+    pub dir: PathBuf,
+    pub config: Config,
+    pub reference: GrayImage,
+    pub truth: Vec<Truth>,
+}
+
+pub fn sample(name: &str) -> Session {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/samples")
+        .join(name);
+    let config = Config::load(&dir.join("probe.toml")).unwrap();
+    let cal = config.tracker.calibration.as_ref().unwrap();
+    let reference = image::open(&cal.reference_image).unwrap().to_luma8();
+    let truth = read_truth(&dir.join("truth.csv"));
+    Session {
+        dir,
+        config,
+        reference,
+        truth,
+    }
+}
+
+impl Session {
+    pub fn calibrate(&self) -> Calibration {
+        let clicks = self.config.tracker.calibration.as_ref().unwrap();
+        Calibration::from_reference(&self.reference, clicks, &self.config.tracker).unwrap()
+    }
+
+    pub fn frame(&self, name: &str) -> GrayImage {
+        image::open(self.dir.join("frames").join(name))
+            .unwrap()
+            .to_luma8()
+    }
+
+    /// Tracks every frame in order; returns the estimates by truth row.
+    pub fn run(&self, coherence: bool) -> Vec<Estimate> {
+        let mut tracker = Tracker::new(
+            &self.config.tracker,
+            self.calibrate(),
+            Some(self.config.cantilever),
+        );
+        tracker.set_coherence(coherence);
+        self.truth
+            .iter()
+            .map(|t| tracker.track(&self.frame(&t.frame)))
+            .collect()
+    }
+}
+
+/// Scores as score.py does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Score {
+    pub frames: usize,
+    pub positives: usize,
+    pub detect_rate: f64,
+    pub false_detections: usize,
+    pub angle_err_median_deg: f64,
+    pub angle_err_p95_deg: f64,
+    pub angle_err_max_deg: f64,
+    pub tip_err_median_px: f64,
+}
+
+/// numpy's default (linear) percentile of unsorted data.
+pub fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::INFINITY;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let pos = q / 100.0 * (v.len() - 1) as f64;
+    let (i, frac) = (pos.floor() as usize, pos - pos.floor());
+    if i + 1 < v.len() {
+        v[i] + frac * (v[i + 1] - v[i])
+    } else {
+        v[i]
+    }
+}
+
+pub fn angle_errors(truth: &[Truth], est: &[Estimate]) -> Vec<f64> {
+    truth
+        .iter()
+        .zip(est)
+        .filter(|(t, e)| t.detected && e.detected)
+        .map(|(t, e)| (e.angle_deg.unwrap() - t.angle_deg).abs())
+        .collect()
+}
+
+pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {
+    let positives = truth.iter().filter(|t| t.detected).count();
+    let detected = truth
+        .iter()
+        .zip(est)
+        .filter(|(t, e)| t.detected && e.detected)
+        .count();
+    let false_detections = truth
+        .iter()
+        .zip(est)
+        .filter(|(t, e)| !t.detected && e.detected)
+        .count();
+    let ang = angle_errors(truth, est);
+    let tip: Vec<f64> = truth
+        .iter()
+        .zip(est)
+        .filter(|(t, e)| t.detected && e.detected)
+        .map(|(t, e)| {
+            e.apex_px
+                .map_or(f64::INFINITY, |a| (a[0] - t.tip[0]).hypot(a[1] - t.tip[1]))
+        })
+        .collect();
+    Score {
+        frames: truth.len(),
+        positives,
+        detect_rate: detected as f64 / positives.max(1) as f64,
+        false_detections,
+        angle_err_median_deg: percentile(&ang, 50.0),
+        angle_err_p95_deg: percentile(&ang, 95.0),
+        angle_err_max_deg: ang
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+            .max(if ang.is_empty() { f64::INFINITY } else { 0.0 }),
+        tip_err_median_px: percentile(&tip, 50.0),
+    }
+}
+
+/// A result CSV in the layout score.py reads.
+pub fn result_csv(truth: &[Truth], est: &[Estimate]) -> String {
+    let mut out = String::from("frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence\n");
+    for (t, e) in truth.iter().zip(est) {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+        out += &format!(
+            "{},{},{},{},{},{},{:.3}\n",
+            t.frame,
+            e.detected as u8,
+            opt(e.angle_deg),
+            opt(e.force_nn),
+            opt(e.apex_px.map(|a| a[0])),
+            opt(e.apex_px.map(|a| a[1])),
+            e.confidence
+        );
+    }
+    out
+}
+
+/// Per-frame comparison table, for failure messages.
+pub fn table(truth: &[Truth], est: &[Estimate]) -> String {
+    let mut out = String::new();
+    for (t, e) in truth.iter().zip(est) {
+        let err = match (t.detected, e.angle_deg) {
+            (true, Some(a)) => format!("{:+.4}", a - t.angle_deg),
+            _ => "-".into(),
+        };
+        let tip = match e.apex_px {
+            Some(a) if t.detected => format!("{:.2}", (a[0] - t.tip[0]).hypot(a[1] - t.tip[1])),
+            _ => "-".into(),
+        };
+        out += &format!(
+            "{} truth {} {:+8.3} {:5} {:8} | det {} err {} tip {} conf {:.2} miss {:?}\n",
+            t.frame,
+            t.detected as u8,
+            t.angle_deg,
+            t.magnification,
+            t.style,
+            e.detected as u8,
+            err,
+            tip,
+            e.confidence,
+            e.miss
+        );
+    }
+    out
+}
