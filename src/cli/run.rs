@@ -16,7 +16,8 @@ use crate::hw::Clock;
 pub const SIM_CONFIG: &str = include_str!("../../config/sim.toml");
 
 #[derive(Debug, Args)]
-#[command(long_about = "Runs the real-time teleoperation daemon.\n\n\
+#[command(
+    long_about = "Runs the real-time teleoperation daemon.\n\n\
 Threads: frames (the SEM source) -> tracker (tip angle and force) -> the 1 kHz haptic \
 loop, which reads the stylus, renders the scaled force on top of centring springs and \
 sends the S100 its rate command. Without --config the built-in simulated lab runs \
@@ -28,7 +29,8 @@ Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.to
 stats.json) in a session folder under the state directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
 nanoforce run --duration-s 30 --stats-json stats.json\n  \
-nanoforce run --config /etc/nanoforce/lab.toml")]
+nanoforce run --config /etc/nanoforce/lab.toml"
+)]
 pub struct RunArgs {
     /// Lab configuration (TOML); default: the built-in simulated lab.
     #[arg(long, value_name = "FILE")]
@@ -66,7 +68,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         let state_dir = args
             .state_dir
-            .or_else(|| std::env::var_os("STATE_DIRECTORY").is_none().then(|| config.daemon.state_dir.clone()).flatten())
+            .or_else(|| {
+                std::env::var_os("STATE_DIRECTORY")
+                    .is_none()
+                    .then(|| config.daemon.state_dir.clone())
+                    .flatten()
+            })
             .unwrap_or_else(telemetry::default_state_dir);
         let dir = telemetry::create_session_dir(&state_dir)
             .with_context(|| format!("creating a session folder under {}", state_dir.display()))?;

@@ -48,8 +48,7 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
         press_direction: teleop.press_direction_stage,
     };
     let scene = SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign);
-    let (reference, clicks) =
-        scene.reference(config.tracker.threshold, config.tracker.window_deg);
+    let (reference, clicks) = scene.reference(config.tracker.threshold, config.tracker.window_deg);
     let calibration = calibrate(config, &reference, &clicks)?;
     let tracker = Tracker::new(&config.tracker, calibration, Some(config.cantilever));
     let frames = SimSem::new(scene, Some(snapshots), clock);

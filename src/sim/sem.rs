@@ -62,11 +62,20 @@ impl SemScene {
     }
 
     /// The frame captured at `t_s` with the stage at `stage_um`, and its truth.
-    pub fn frame(&self, t_s: f64, sequence: u64, stage_um: Vector3<f64>) -> (FrameSpec, FrameTruth) {
+    pub fn frame(
+        &self,
+        t_s: f64,
+        sequence: u64,
+        stage_um: Vector3<f64>,
+    ) -> (FrameSpec, FrameTruth) {
         let bending: Bending = self.contact.bending(stage_um);
         let angle_deg = self.pressing_sign * bending.phi0_rad.to_degrees();
         let magnification = self.params.magnification_at(t_s);
-        let seed = self.params.seed.wrapping_mul(1_000_003).wrapping_add(sequence);
+        let seed = self
+            .params
+            .seed
+            .wrapping_mul(1_000_003)
+            .wrapping_add(sequence);
         let mut spec = self.setup.frame(self.style, angle_deg, magnification, seed);
         // Before contact the probe descends toward its contact point; then the apex stays
         // on the sample and the beam bends.
@@ -89,9 +98,12 @@ impl SemScene {
     }
 
     /// The calibration frame (undeformed probe) and the clicks a person would make on it.
-    pub fn reference(&self, threshold: Threshold, window_deg: f64) -> (GrayImage, CalibrationConfig) {
-        let mut reference = self.setup.reference(self.params.seed);
-        reference.magnification = self.params.reference_magnification;
+    pub fn reference(
+        &self,
+        threshold: Threshold,
+        window_deg: f64,
+    ) -> (GrayImage, CalibrationConfig) {
+        let reference = self.setup.reference(self.params.seed);
         let session = Session {
             reference,
             frames: Vec::new(),
