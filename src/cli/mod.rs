@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod model;
+pub mod replay;
 pub mod run;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
@@ -29,6 +30,8 @@ pub struct Cli {
 pub enum Command {
     /// Run the real-time teleoperation daemon (default: the built-in simulated lab).
     Run(run::RunArgs),
+    /// Track the tip in a recorded session's frames and write the results CSV.
+    Replay(replay::ReplayArgs),
     Model(model::ModelArgs),
 }
 
@@ -37,6 +40,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
         Command::Run(args) => run::run(args),
+        Command::Replay(args) => replay::run(args),
         Command::Model(args) => model::run(args),
     }
 }

@@ -10,6 +10,7 @@ use crate::hw::daq::sim::SimStage;
 use crate::hw::frames::sim::SimSem;
 use crate::hw::haptic::sim::SimHaptic;
 use crate::hw::Clock;
+use crate::session::frames::load_gray;
 use crate::sim::contact::Contact;
 use crate::sim::operator::{HandModel, Operator};
 use crate::sim::sem::SemScene;
@@ -64,6 +65,30 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
         stage: Box::new(stage),
         haptic: Box::new(haptic),
     })
+}
+
+/// The tracker a configuration describes, calibrated on its `[tracker.calibration]`
+/// reference image (for recorded or live frames from a real SEM).
+pub fn tracker_from_config(config: &Config) -> anyhow::Result<Tracker> {
+    let Some(clicks) = &config.tracker.calibration else {
+        anyhow::bail!(
+            "{}: no [tracker.calibration] section: the tracker needs a reference image and \
+             clicked edge pixels (see `nanoforce calibrate --help`)",
+            config.path.display()
+        );
+    };
+    let reference = load_gray(&clicks.reference_image).with_context(|| {
+        format!(
+            "{}: tracker.calibration.reference_image",
+            config.path.display()
+        )
+    })?;
+    let calibration = calibrate(config, &reference, clicks)?;
+    Ok(Tracker::new(
+        &config.tracker,
+        calibration,
+        Some(config.cantilever),
+    ))
 }
 
 fn calibrate(
