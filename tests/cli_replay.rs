@@ -116,10 +116,13 @@ fn corrupt_frames_are_reported_and_skipped() {
     assert!(rows[0].starts_with("frame_00000.png,1,") && rows[3].starts_with("frame_00003.png,1,"));
 }
 
+/// Writes a frame in one file format.
+type SaveFn = fn(&GrayImage, &Path);
+
 #[test]
 fn tiff16_and_pgm_frames_track_like_png() {
     let (dir, _src, frames) = session_copy("mixed", 4);
-    let formats: [(&str, fn(&GrayImage, &Path)); 3] = [
+    let formats: [(&str, SaveFn); 3] = [
         ("png", |img, p| img.save(p).unwrap()),
         ("pgm", |img, p| img.save(p).unwrap()),
         ("tif", |img, p| {
