@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod calibrate;
 mod model;
 pub mod replay;
 pub mod run;
@@ -32,6 +33,8 @@ pub enum Command {
     Run(run::RunArgs),
     /// Track the tip in a recorded session's frames and write the results CSV.
     Replay(replay::ReplayArgs),
+    /// Refine clicked tip edges on a reference frame; print the calibration block.
+    Calibrate(calibrate::CalibrateArgs),
     Model(model::ModelArgs),
 }
 
@@ -41,6 +44,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Model(args) => model::run(args),
     }
 }
