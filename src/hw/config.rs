@@ -1,36 +1,47 @@
-//! `[frames]`, `[daq]`, `[haptic]`: which backend drives each device kind. The default
-//! for every kind is `"sim"`, the simulated lab, so a configuration that names no
-//! hardware never touches any.
-use serde::Deserialize;
+//! `[frames]`, `[daq]`, `[haptic]`: which backend drives each device kind, and its
+//! settings. The default for every kind is `"sim"`, the simulated lab, so a
+//! configuration that names no hardware never touches any.
+//!
+//! Each section is read as a TOML table here and then into the backend's own raw struct
+//! (`deny_unknown_fields`), so `src/config.rs` needs to know nothing about backends.
+//! Keys are validated in every build; whether the backend's cargo feature is compiled
+//! in is checked when the device is opened ([`crate::daemon::lab::open`]), so a
+//! configuration can be checked anywhere.
+use serde::de::DeserializeOwned;
 
+use super::daq::config::{ComediConfig, RawDaq};
+use super::frames::config::{PipeConfig, RawFrames, V4l2Config};
+use super::haptic::config::{HidConfig, OpenHapticsConfig, RawHaptic};
 use crate::config::{Checker, ConfigError};
 
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawDevice {
-    backend: Option<String>,
-}
+/// One device section, as written in the file.
+pub(crate) type RawDevice = toml::Table;
 
 /// Where frames come from.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum FramesBackend {
     Sim,
+    V4l2(V4l2Config),
+    Pipe(PipeConfig),
 }
 
 /// What drives the S100's rate inputs.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum DaqBackend {
     Sim,
+    Comedi(ComediConfig),
 }
 
 /// The operator's device.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum HapticBackend {
     Sim,
+    OpenHaptics(OpenHapticsConfig),
+    Hid(HidConfig),
 }
 
 /// Validated device selection.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DevicesConfig {
     pub frames: FramesBackend,
     pub daq: DaqBackend,
@@ -59,20 +70,129 @@ impl DevicesConfig {
         haptic: RawDevice,
         check: &Checker,
     ) -> Result<DevicesConfig, ConfigError> {
-        let backend = |section: &str, raw: &RawDevice, known: &[&str]| -> Result<(), ConfigError> {
-            match raw.backend.as_deref() {
-                None => Ok(()),
-                Some(name) if known.contains(&name) => Ok(()),
-                Some(name) => Err(check.invalid(
-                    &format!("{section}.backend"),
-                    format_args!("{name:?}"),
-                    &format!("must be one of {known:?}"),
-                )),
-            }
-        };
-        backend("frames", &frames, &["sim"])?;
-        backend("daq", &daq, &["sim"])?;
-        backend("haptic", &haptic, &["sim"])?;
-        Ok(DevicesConfig::default())
+        let frames: RawFrames = section(check, "frames", frames)?;
+        let daq: RawDaq = section(check, "daq", daq)?;
+        let haptic: RawHaptic = section(check, "haptic", haptic)?;
+        Ok(DevicesConfig {
+            frames: frames.validate(check)?,
+            daq: daq.validate(check)?,
+            haptic: haptic.validate(check)?,
+        })
+    }
+}
+
+/// Reads a section table into its raw struct; errors name the section.
+fn section<T: DeserializeOwned>(
+    check: &Checker,
+    name: &str,
+    table: RawDevice,
+) -> Result<T, ConfigError> {
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| check.inconsistent(format!("[{name}]: {}", e.message())))
+}
+
+/// The backend name of a section, checked against the known ones.
+pub(crate) fn backend_name<'a>(
+    check: &Checker,
+    section: &str,
+    name: &'a Option<String>,
+    known: &[&str],
+) -> Result<&'a str, ConfigError> {
+    match name.as_deref() {
+        None => Ok("sim"),
+        Some(name) if known.contains(&name) => Ok(name),
+        Some(name) => Err(check.invalid(
+            &format!("{section}.backend"),
+            format_args!("{name:?}"),
+            &format!("must be one of {known:?}"),
+        )),
+    }
+}
+
+/// Rejects keys that the chosen option does not use (`present`: key name, whether set;
+/// `chosen`: `"frames.backend = \"v4l2\""`).
+pub(crate) fn only_for(
+    check: &Checker,
+    section: &str,
+    chosen: &str,
+    present: &[(&str, bool)],
+) -> Result<(), ConfigError> {
+    match present.iter().find(|(_, set)| *set) {
+        Some((key, _)) => {
+            Err(check.inconsistent(format!("{section}.{key} is not used by {chosen}")))
+        }
+        None => Ok(()),
+    }
+}
+
+/// A required key of a backend.
+pub(crate) fn required<T>(
+    check: &Checker,
+    key: &str,
+    backend: &str,
+    value: Option<T>,
+) -> Result<T, ConfigError> {
+    value
+        .ok_or_else(|| check.inconsistent(format!("missing {key} (needed by backend {backend:?})")))
+}
+
+/// A whole number in `lo..=hi`.
+pub(crate) fn in_range(
+    check: &Checker,
+    key: &str,
+    value: i64,
+    lo: i64,
+    hi: i64,
+) -> Result<u32, ConfigError> {
+    if (lo..=hi).contains(&value) {
+        Ok(value as u32)
+    } else {
+        Err(check.invalid(key, value, &format!("must be in {lo}..={hi}")))
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::config::Config;
+
+    const BASE: &str = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n";
+
+    pub(crate) fn parse(devices: &str) -> Result<Config, ConfigError> {
+        Config::from_toml_str(&format!("{BASE}{devices}"), Path::new("lab.toml"))
+    }
+
+    pub(crate) fn error_of(devices: &str) -> String {
+        parse(devices).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn sim_is_the_default() {
+        assert!(parse("").unwrap().devices.all_simulated());
+        assert!(parse("[frames]\nbackend = \"sim\"\n[daq]\n[haptic]\n")
+            .unwrap()
+            .devices
+            .all_simulated());
+    }
+
+    #[test]
+    fn unknown_backend_and_key_are_named() {
+        assert_eq!(
+            error_of("[frames]\nbackend = \"usb\"\n"),
+            "lab.toml: frames.backend must be one of [\"sim\", \"v4l2\", \"pipe\"], got \"usb\""
+        );
+        let msg = error_of("[daq]\nbackend = \"comedi\"\ndevise = \"/dev/comedi0\"\n");
+        assert!(
+            msg.starts_with("lab.toml: [daq]: unknown field `devise`"),
+            "{msg}"
+        );
+        let msg = error_of("[frames]\ndevice = \"/dev/video0\"\n");
+        assert_eq!(
+            msg,
+            "lab.toml: frames.device is not used by frames.backend = \"sim\""
+        );
     }
 }

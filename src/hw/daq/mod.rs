@@ -22,4 +22,5 @@ pub trait RateOutput: Send {
         self.write_velocity(now_s, Vector3::zeros())
     }
 }
+pub mod config;
 pub mod sim;

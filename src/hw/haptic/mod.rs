@@ -31,4 +31,5 @@ pub trait HapticDevice: Send {
     /// Turns force output on or off; off must leave the stylus free.
     fn set_forces_enabled(&mut self, enabled: bool) -> Result<(), HapticError>;
 }
+pub mod config;
 pub mod sim;

@@ -1,0 +1,303 @@
+//! `[haptic]`: the operator's device. `"sim"` (the scripted virtual operator),
+//! `"openhaptics"` (a PHANToM through OpenHaptics' HD API, `libHD.so` loaded at run
+//! time) or `"hid"` (a USB-HID device through hidapi: a HID haptic device, or a plain
+//! joystick that gives position without force feedback). For `"hid"` the report layout
+//! comes from `[haptic.x]`, `[haptic.y]`, `[haptic.z]` and, for force output,
+//! `[haptic.force]`.
+use serde::Deserialize;
+
+use crate::config::{Checker, ConfigError};
+use crate::hw::config::{backend_name, in_range, only_for, required, HapticBackend};
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHaptic {
+    backend: Option<String>,
+    library: Option<String>,
+    device_name: Option<String>,
+    stall_ms: Option<i64>,
+    vendor_id: Option<i64>,
+    product_id: Option<i64>,
+    report_id: Option<i64>,
+    report_length: Option<i64>,
+    x: Option<RawHidAxis>,
+    y: Option<RawHidAxis>,
+    z: Option<RawHidAxis>,
+    force: Option<RawHidForce>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHidAxis {
+    byte: i64,
+    kind: String,
+    min: i64,
+    max: i64,
+    travel_mm: f64,
+    invert: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHidForce {
+    report_id: i64,
+    report_length: i64,
+    bytes: [i64; 3],
+    full_scale_n: f64,
+}
+
+/// Validated `[haptic]` of `backend = "openhaptics"`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpenHapticsConfig {
+    /// Passed to dlopen: a file name searched the usual way, or a path.
+    pub library: String,
+    /// The device name given to `hdInitDevice` (None: `HD_DEFAULT_DEVICE`).
+    pub device_name: Option<String>,
+    /// The servo loop not ticking for this long means the device is lost.
+    pub stall_ms: u64,
+}
+
+/// How one field of a HID input report is encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FieldKind {
+    U8,
+    I8,
+    U16Le,
+    I16Le,
+}
+
+impl FieldKind {
+    pub fn len(self) -> usize {
+        match self {
+            FieldKind::U8 | FieldKind::I8 => 1,
+            FieldKind::U16Le | FieldKind::I16Le => 2,
+        }
+    }
+}
+
+/// One stylus axis in the input report: raw `min..=max` maps to `travel_mm` centred.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HidAxis {
+    /// Offset in the report (byte 0 is the report id when the device numbers reports).
+    pub byte: usize,
+    pub kind: FieldKind,
+    pub min: i64,
+    pub max: i64,
+    pub travel_mm: f64,
+    pub invert: bool,
+}
+
+/// The output report that renders a force: three little-endian i16, +-32767 = full scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HidForce {
+    pub report_id: u8,
+    pub report_length: usize,
+    pub bytes: [usize; 3],
+    pub full_scale_n: f64,
+}
+
+/// Validated `[haptic]` of `backend = "hid"`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HidConfig {
+    pub vendor_id: u16,
+    pub product_id: u16,
+    /// Only input reports whose first byte is this are used.
+    pub report_id: Option<u8>,
+    pub report_length: usize,
+    pub axes: [HidAxis; 3],
+    /// None: a joystick, position only.
+    pub force: Option<HidForce>,
+}
+
+impl RawHaptic {
+    pub(crate) fn validate(self, check: &Checker) -> Result<HapticBackend, ConfigError> {
+        let known = ["sim", "openhaptics", "hid"];
+        let backend = backend_name(check, "haptic", &self.backend, &known)?;
+        let chosen = format!("haptic.backend = {backend:?}");
+        let hd_keys = [
+            ("library", self.library.is_some()),
+            ("device_name", self.device_name.is_some()),
+            ("stall_ms", self.stall_ms.is_some()),
+        ];
+        let hid_keys = [
+            ("vendor_id", self.vendor_id.is_some()),
+            ("product_id", self.product_id.is_some()),
+            ("report_id", self.report_id.is_some()),
+            ("report_length", self.report_length.is_some()),
+            ("x", self.x.is_some()),
+            ("y", self.y.is_some()),
+            ("z", self.z.is_some()),
+            ("force", self.force.is_some()),
+        ];
+        match backend {
+            "openhaptics" => {
+                only_for(check, "haptic", &chosen, &hid_keys)?;
+                let stall_ms = self.stall_ms.map_or(Ok(50), |s| {
+                    in_range(check, "haptic.stall_ms", s, 5, 10_000).map(u64::from)
+                })?;
+                Ok(HapticBackend::OpenHaptics(OpenHapticsConfig {
+                    library: self.library.unwrap_or_else(|| "libHD.so".into()),
+                    device_name: self.device_name,
+                    stall_ms,
+                }))
+            }
+            "hid" => {
+                only_for(check, "haptic", &chosen, &hd_keys)?;
+                self.hid(check).map(HapticBackend::Hid)
+            }
+            _ => {
+                only_for(check, "haptic", &chosen, &hd_keys)?;
+                only_for(check, "haptic", &chosen, &hid_keys)?;
+                Ok(HapticBackend::Sim)
+            }
+        }
+    }
+
+    fn hid(self, check: &Checker) -> Result<HidConfig, ConfigError> {
+        let id = |key: &str, v: Option<i64>| -> Result<u16, ConfigError> {
+            let v = required(check, key, "hid", v)?;
+            in_range(check, key, v, 0, 0xffff).map(|v| v as u16)
+        };
+        let vendor_id = id("haptic.vendor_id", self.vendor_id)?;
+        let product_id = id("haptic.product_id", self.product_id)?;
+        let report_id = self
+            .report_id
+            .map(|r| in_range(check, "haptic.report_id", r, 0, 255).map(|r| r as u8))
+            .transpose()?;
+        let report_length = required(check, "haptic.report_length", "hid", self.report_length)?;
+        let report_length = in_range(check, "haptic.report_length", report_length, 1, 1024)?;
+        let mut axes = Vec::with_capacity(3);
+        for (name, raw) in [("x", self.x), ("y", self.y), ("z", self.z)] {
+            let key = format!("haptic.{name}");
+            let raw = required(check, &format!("[{key}]"), "hid", raw)?;
+            axes.push(raw.validate(check, &key, report_length as usize)?);
+        }
+        let force = self.force.map(|f| f.validate(check)).transpose()?;
+        Ok(HidConfig {
+            vendor_id,
+            product_id,
+            report_id,
+            report_length: report_length as usize,
+            axes: [axes[0], axes[1], axes[2]],
+            force,
+        })
+    }
+}
+
+impl RawHidAxis {
+    fn validate(self, check: &Checker, key: &str, length: usize) -> Result<HidAxis, ConfigError> {
+        let kind = match self.kind.as_str() {
+            "u8" => FieldKind::U8,
+            "i8" => FieldKind::I8,
+            "u16le" => FieldKind::U16Le,
+            "i16le" => FieldKind::I16Le,
+            other => {
+                return Err(check.invalid(
+                    &format!("{key}.kind"),
+                    format_args!("{other:?}"),
+                    "must be \"u8\", \"i8\", \"u16le\" or \"i16le\"",
+                ))
+            }
+        };
+        let last = length as i64 - kind.len() as i64;
+        let byte = in_range(check, &format!("{key}.byte"), self.byte, 0, last)? as usize;
+        if self.max <= self.min {
+            return Err(check.invalid(
+                &format!("{key}.max"),
+                self.max,
+                &format!("must be > {key}.min ({})", self.min),
+            ));
+        }
+        Ok(HidAxis {
+            byte,
+            kind,
+            min: self.min,
+            max: self.max,
+            travel_mm: check.positive(&format!("{key}.travel_mm"), self.travel_mm)?,
+            invert: self.invert.unwrap_or(false),
+        })
+    }
+}
+
+impl RawHidForce {
+    fn validate(self, check: &Checker) -> Result<HidForce, ConfigError> {
+        let report_id = in_range(check, "haptic.force.report_id", self.report_id, 0, 255)?;
+        let length = in_range(
+            check,
+            "haptic.force.report_length",
+            self.report_length,
+            7,
+            1024,
+        )?;
+        let mut bytes = [0usize; 3];
+        for (slot, b) in bytes.iter_mut().zip(self.bytes) {
+            *slot = in_range(check, "haptic.force.bytes", b, 1, i64::from(length) - 2)? as usize;
+        }
+        Ok(HidForce {
+            report_id: report_id as u8,
+            report_length: length as usize,
+            bytes,
+            full_scale_n: check.positive("haptic.force.full_scale_n", self.full_scale_n)?,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::hw::config::tests::{error_of, parse};
+    use crate::hw::config::HapticBackend;
+    use crate::hw::haptic::config::*;
+
+    const JOYSTICK: &str = "[haptic]\nbackend = \"hid\"\nvendor_id = 0x046d\nproduct_id = 0xc215\n\
+        report_length = 7\n\
+        [haptic.x]\nbyte = 0\nkind = \"u16le\"\nmin = 0\nmax = 1023\ntravel_mm = 60\n\
+        [haptic.y]\nbyte = 2\nkind = \"u16le\"\nmin = 0\nmax = 1023\ntravel_mm = 60\ninvert = true\n\
+        [haptic.z]\nbyte = 5\nkind = \"u8\"\nmin = 0\nmax = 255\ntravel_mm = 60\n";
+
+    #[test]
+    fn openhaptics_defaults() {
+        let cfg = parse("[haptic]\nbackend = \"openhaptics\"\n").unwrap();
+        assert_eq!(
+            cfg.devices.haptic,
+            HapticBackend::OpenHaptics(OpenHapticsConfig {
+                library: "libHD.so".into(),
+                device_name: None,
+                stall_ms: 50
+            })
+        );
+    }
+
+    #[test]
+    fn hid_joystick_layout() {
+        let HapticBackend::Hid(h) = parse(JOYSTICK).unwrap().devices.haptic else {
+            panic!("not hid")
+        };
+        assert_eq!(
+            (h.vendor_id, h.product_id, h.report_length),
+            (0x046d, 0xc215, 7)
+        );
+        assert_eq!(h.axes[1].kind, FieldKind::U16Le);
+        assert!(h.axes[1].invert && h.force.is_none());
+    }
+
+    #[test]
+    fn hid_errors_name_key_and_value() {
+        let msg = error_of(&JOYSTICK.replace("byte = 5", "byte = 7"));
+        assert_eq!(msg, "lab.toml: haptic.z.byte must be in 0..=6, got 7");
+        let msg = error_of(&JOYSTICK.replace("kind = \"u8\"", "kind = \"f32\""));
+        assert!(
+            msg.contains("haptic.z.kind") && msg.contains("\"f32\""),
+            "{msg}"
+        );
+        let msg = error_of(&JOYSTICK.replace("product_id = 0xc215", "product_id = 70000"));
+        assert_eq!(
+            msg,
+            "lab.toml: haptic.product_id must be in 0..=65535, got 70000"
+        );
+        let msg = error_of("[haptic]\nbackend = \"openhaptics\"\nvendor_id = 1\n");
+        assert_eq!(
+            msg,
+            "lab.toml: haptic.vendor_id is not used by haptic.backend = \"openhaptics\""
+        );
+    }
+}
