@@ -1,5 +1,6 @@
 //! The S100's rate commands: a [`RateOutput`] turns a stage velocity into the DAQ's
-//! outputs. Dropping one must leave the outputs at zero.
+//! outputs. Dropping one must leave the outputs at zero. Backends: [`sim`] (always) and
+//! `comedi` (cargo feature `comedi`).
 use nalgebra::Vector3;
 
 #[derive(Debug, thiserror::Error)]
@@ -22,5 +23,9 @@ pub trait RateOutput: Send {
         self.write_velocity(now_s, Vector3::zeros())
     }
 }
+#[cfg(feature = "comedi")]
+pub mod comedi;
+#[cfg(feature = "comedi")]
+pub mod comedi_sys;
 pub mod config;
 pub mod sim;
