@@ -9,4 +9,6 @@
 //! Needs `--features hardware` (each module needs its own feature).
 #[cfg(feature = "comedi")]
 mod comedi;
+#[cfg(feature = "openhaptics")]
+mod openhaptics;
 mod support;

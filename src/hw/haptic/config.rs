@@ -67,7 +67,7 @@ pub enum FieldKind {
 }
 
 impl FieldKind {
-    pub fn len(self) -> usize {
+    pub fn size_bytes(self) -> usize {
         match self {
             FieldKind::U8 | FieldKind::I8 => 1,
             FieldKind::U16Le | FieldKind::I16Le => 2,
@@ -199,7 +199,7 @@ impl RawHidAxis {
                 ))
             }
         };
-        let last = length as i64 - kind.len() as i64;
+        let last = length as i64 - kind.size_bytes() as i64;
         let byte = in_range(check, &format!("{key}.byte"), self.byte, 0, last)? as usize;
         if self.max <= self.min {
             return Err(check.invalid(

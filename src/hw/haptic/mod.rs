@@ -1,5 +1,6 @@
 //! The operator's stylus: a [`HapticDevice`] gives position and velocity and takes a
-//! force, in its own frame (millimetres, newtons).
+//! force, in its own frame (millimetres, newtons). Backends: [`sim`] (always),
+//! `openhaptics` (cargo feature `openhaptics`) and `hid` (cargo feature `hidapi`).
 use nalgebra::Vector3;
 
 use crate::control::HapticSample;
@@ -32,4 +33,8 @@ pub trait HapticDevice: Send {
     fn set_forces_enabled(&mut self, enabled: bool) -> Result<(), HapticError>;
 }
 pub mod config;
+#[cfg(feature = "openhaptics")]
+pub mod hd_sys;
+#[cfg(feature = "openhaptics")]
+pub mod openhaptics;
 pub mod sim;
