@@ -41,4 +41,5 @@ pub trait FrameSource: Send {
     fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError>;
 }
 pub mod config;
+pub mod pipe;
 pub mod sim;
