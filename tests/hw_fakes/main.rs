@@ -7,6 +7,12 @@
 //! - `hid`: a fake `libhidapi-hidraw.so.0` replaying recorded reports (child).
 //!
 //! Needs `--features hardware` (each module needs its own feature).
+#![cfg(any(
+    feature = "comedi",
+    feature = "openhaptics",
+    feature = "v4l2",
+    feature = "hidapi"
+))]
 #[cfg(feature = "comedi")]
 mod comedi;
 #[cfg(feature = "openhaptics")]
