@@ -18,3 +18,5 @@ mod comedi;
 #[cfg(feature = "openhaptics")]
 mod openhaptics;
 mod support;
+#[cfg(feature = "v4l2")]
+mod v4l2;

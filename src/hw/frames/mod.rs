@@ -1,5 +1,6 @@
 //! SEM frames: a [`FrameSource`] blocks until the next frame, fills a reused grey buffer
 //! and says when it was captured (on the daemon's [`Clock`](crate::hw::Clock)).
+//! Backends: [`sim`] and [`pipe`] (always), `v4l2` (cargo feature `v4l2`).
 use image::GrayImage;
 
 /// What comes with a frame.
@@ -41,5 +42,10 @@ pub trait FrameSource: Send {
     fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError>;
 }
 pub mod config;
+pub mod convert;
 pub mod pipe;
 pub mod sim;
+#[cfg(feature = "v4l2")]
+pub mod v4l2;
+#[cfg(feature = "v4l2")]
+pub mod v4l2_sys;
