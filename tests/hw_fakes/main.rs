@@ -15,6 +15,8 @@
 ))]
 #[cfg(feature = "comedi")]
 mod comedi;
+#[cfg(feature = "hidapi")]
+mod hid;
 #[cfg(feature = "openhaptics")]
 mod openhaptics;
 mod support;

@@ -29,8 +29,9 @@ pub(crate) struct RawHaptic {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawHidAxis {
-    byte: i64,
-    kind: String,
+    bit: i64,
+    bits: i64,
+    signed: Option<bool>,
     min: i64,
     max: i64,
     travel_mm: f64,
@@ -57,30 +58,17 @@ pub struct OpenHapticsConfig {
     pub stall_ms: u64,
 }
 
-/// How one field of a HID input report is encoded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FieldKind {
-    U8,
-    I8,
-    U16Le,
-    I16Le,
-}
-
-impl FieldKind {
-    pub fn size_bytes(self) -> usize {
-        match self {
-            FieldKind::U8 | FieldKind::I8 => 1,
-            FieldKind::U16Le | FieldKind::I16Le => 2,
-        }
-    }
-}
-
-/// One stylus axis in the input report: raw `min..=max` maps to `travel_mm` centred.
+/// One stylus axis in the input report: a little-endian bit field (HID's bit order),
+/// whose raw `min..=max` maps to `travel_mm` centred on the middle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HidAxis {
-    /// Offset in the report (byte 0 is the report id when the device numbers reports).
-    pub byte: usize,
-    pub kind: FieldKind,
+    /// Offset of the field's lowest bit from the start of the report (byte 0 is the
+    /// report id when the device numbers its reports).
+    pub bit: usize,
+    /// Width of the field, 1..=32 bits.
+    pub bits: u32,
+    /// Two's complement field.
+    pub signed: bool,
     pub min: i64,
     pub max: i64,
     pub travel_mm: f64,
@@ -186,21 +174,9 @@ impl RawHaptic {
 
 impl RawHidAxis {
     fn validate(self, check: &Checker, key: &str, length: usize) -> Result<HidAxis, ConfigError> {
-        let kind = match self.kind.as_str() {
-            "u8" => FieldKind::U8,
-            "i8" => FieldKind::I8,
-            "u16le" => FieldKind::U16Le,
-            "i16le" => FieldKind::I16Le,
-            other => {
-                return Err(check.invalid(
-                    &format!("{key}.kind"),
-                    format_args!("{other:?}"),
-                    "must be \"u8\", \"i8\", \"u16le\" or \"i16le\"",
-                ))
-            }
-        };
-        let last = length as i64 - kind.size_bytes() as i64;
-        let byte = in_range(check, &format!("{key}.byte"), self.byte, 0, last)? as usize;
+        let bits = in_range(check, &format!("{key}.bits"), self.bits, 1, 32)?;
+        let last = 8 * length as i64 - i64::from(bits);
+        let bit = in_range(check, &format!("{key}.bit"), self.bit, 0, last)? as usize;
         if self.max <= self.min {
             return Err(check.invalid(
                 &format!("{key}.max"),
@@ -209,8 +185,9 @@ impl RawHidAxis {
             ));
         }
         Ok(HidAxis {
-            byte,
-            kind,
+            bit,
+            bits,
+            signed: self.signed.unwrap_or(false),
             min: self.min,
             max: self.max,
             travel_mm: check.positive(&format!("{key}.travel_mm"), self.travel_mm)?,
@@ -250,9 +227,9 @@ mod tests {
 
     const JOYSTICK: &str = "[haptic]\nbackend = \"hid\"\nvendor_id = 0x046d\nproduct_id = 0xc215\n\
         report_length = 7\n\
-        [haptic.x]\nbyte = 0\nkind = \"u16le\"\nmin = 0\nmax = 1023\ntravel_mm = 60\n\
-        [haptic.y]\nbyte = 2\nkind = \"u16le\"\nmin = 0\nmax = 1023\ntravel_mm = 60\ninvert = true\n\
-        [haptic.z]\nbyte = 5\nkind = \"u8\"\nmin = 0\nmax = 255\ntravel_mm = 60\n";
+        [haptic.x]\nbit = 0\nbits = 10\nmin = 0\nmax = 1023\ntravel_mm = 60\n\
+        [haptic.y]\nbit = 10\nbits = 10\nmin = 0\nmax = 1023\ntravel_mm = 60\ninvert = true\n\
+        [haptic.z]\nbit = 40\nbits = 8\nmin = 0\nmax = 255\ntravel_mm = 60\n";
 
     #[test]
     fn openhaptics_defaults() {
@@ -276,19 +253,19 @@ mod tests {
             (h.vendor_id, h.product_id, h.report_length),
             (0x046d, 0xc215, 7)
         );
-        assert_eq!(h.axes[1].kind, FieldKind::U16Le);
+        assert_eq!(
+            (h.axes[1].bit, h.axes[1].bits, h.axes[1].signed),
+            (10, 10, false)
+        );
         assert!(h.axes[1].invert && h.force.is_none());
     }
 
     #[test]
     fn hid_errors_name_key_and_value() {
-        let msg = error_of(&JOYSTICK.replace("byte = 5", "byte = 7"));
-        assert_eq!(msg, "lab.toml: haptic.z.byte must be in 0..=6, got 7");
-        let msg = error_of(&JOYSTICK.replace("kind = \"u8\"", "kind = \"f32\""));
-        assert!(
-            msg.contains("haptic.z.kind") && msg.contains("\"f32\""),
-            "{msg}"
-        );
+        let msg = error_of(&JOYSTICK.replace("bit = 40", "bit = 50"));
+        assert_eq!(msg, "lab.toml: haptic.z.bit must be in 0..=48, got 50");
+        let msg = error_of(&JOYSTICK.replace("bits = 8", "bits = 33"));
+        assert_eq!(msg, "lab.toml: haptic.z.bits must be in 1..=32, got 33");
         let msg = error_of(&JOYSTICK.replace("product_id = 0xc215", "product_id = 70000"));
         assert_eq!(
             msg,

@@ -35,6 +35,11 @@ pub trait HapticDevice: Send {
 pub mod config;
 #[cfg(feature = "openhaptics")]
 pub mod hd_sys;
+#[cfg(feature = "hidapi")]
+pub mod hid;
+pub mod hid_report;
+#[cfg(feature = "hidapi")]
+pub mod hidapi_sys;
 #[cfg(feature = "openhaptics")]
 pub mod openhaptics;
 pub mod sim;
