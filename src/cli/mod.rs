@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 pub mod calibrate;
 mod model;
+pub mod probe_devices;
 pub mod replay;
 pub mod run;
 
@@ -36,6 +37,8 @@ pub enum Command {
     /// Refine clicked tip edges on a reference frame; print the calibration block.
     Calibrate(calibrate::CalibrateArgs),
     Model(model::ModelArgs),
+    /// Open each configured device once and list what this machine offers.
+    ProbeDevices(probe_devices::ProbeArgs),
 }
 
 /// Runs one subcommand; the exit code says whether it succeeded.
@@ -46,6 +49,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Replay(args) => replay::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Model(args) => model::run(args),
+        Command::ProbeDevices(args) => probe_devices::run(args),
     }
 }
 

@@ -1,14 +1,19 @@
-//! Opening the lab a configuration describes: each device from its backend, and the
-//! tracker calibrated on its reference frame. With the simulated SEM the reference frame
-//! and the clicks come from the simulator; otherwise from `[tracker.calibration]`.
+//! Opening the lab a configuration describes: each device from its backend (real ones
+//! through [`crate::hw::open`], `"sim"` ones as the simulated lab), and the tracker
+//! calibrated on its reference frame. With the simulated SEM the reference frame and
+//! the clicks come from the simulator; otherwise from `[tracker.calibration]`.
 use anyhow::Context;
 use image::GrayImage;
 
 use super::{Devices, Estimator, FrameEstimate};
 use crate::config::{CalibrationConfig, Config};
+use crate::hw::config::FramesBackend;
 use crate::hw::daq::sim::SimStage;
+use crate::hw::daq::RateOutput;
 use crate::hw::frames::sim::SimSem;
+use crate::hw::frames::FrameSource;
 use crate::hw::haptic::sim::SimHaptic;
+use crate::hw::open as hw_open;
 use crate::hw::Clock;
 use crate::session::frames::load_gray;
 use crate::sim::contact::Contact;
@@ -38,32 +43,82 @@ pub fn from_estimate(e: &Estimate) -> FrameEstimate {
     }
 }
 
-/// Opens every device of `config` (all `"sim"` today; the hardware backends plug in
-/// here) and calibrates the tracker. Fails with a message naming the device.
+/// Opens every device of `config` and calibrates the tracker. A `"sim"` backend gets
+/// its simulated twin; a real one is opened through [`crate::hw::open`]. Fails with a
+/// message naming the device and why, before any motion can start: a backend not
+/// compiled in is found before any device is touched, and a device opened before a
+/// later one failed is closed again (its outputs at zero).
 pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
+    let devices = &config.devices;
+    hw_open::check_compiled(devices)?;
+    // Real frames need the configured calibration: checked before touching a device.
+    let mut configured_tracker = match devices.frames {
+        FramesBackend::Sim => None,
+        _ => Some(tracker_from_config(config)?),
+    };
     let teleop = &config.teleop;
-    let (stage, snapshots) = SimStage::new(config.sim.stage.clone());
-    let contact = Contact {
-        sample: config.sim.sample.clone(),
-        cantilever: config.cantilever,
-        press_direction: teleop.press_direction_stage,
+    let (stage, snapshots): (Box<dyn RateOutput>, _) =
+        match hw_open::daq(&devices.daq).context("opening the DAQ ([daq])")? {
+            Some(daq) => (daq, None),
+            None => {
+                let (stage, snapshots) = SimStage::new(config.sim.stage.clone());
+                (Box::new(stage), Some(snapshots))
+            }
+        };
+    let (frames, tracker): (Box<dyn FrameSource>, Tracker) =
+        match hw_open::frames(&devices.frames, clock)
+            .context("opening the frame source ([frames])")?
+        {
+            Some(frames) => match configured_tracker.take() {
+                Some(tracker) => (frames, tracker),
+                None => anyhow::bail!("no tracker for the configured frames"),
+            },
+            None => {
+                let contact = Contact {
+                    sample: config.sim.sample.clone(),
+                    cantilever: config.cantilever,
+                    press_direction: teleop.press_direction_stage,
+                };
+                let scene =
+                    SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign);
+                let (reference, clicks) =
+                    scene.reference(config.tracker.threshold, config.tracker.window_deg);
+                let calibration = calibrate(config, &reference, &clicks)?;
+                let tracker = Tracker::new(&config.tracker, calibration, Some(config.cantilever));
+                // Without the simulated stage the simulated probe hangs free.
+                (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
+            }
+        };
+    let haptic = match hw_open::haptic(&devices.haptic)
+        .context("opening the haptic device ([haptic])")?
+    {
+        Some(haptic) => haptic,
+        None => {
+            let hand = HandModel {
+                press_direction_haptic: teleop.haptic_from_stage() * teleop.press_direction_stage,
+                spring_n_per_mm: teleop.spring_n_per_mm,
+                force_scale_n_per_nn: teleop.force_scale_n_per_nn,
+            };
+            Box::new(SimHaptic::new(Operator::new(
+                config.sim.operator.clone(),
+                hand,
+            )))
+        }
     };
-    let scene = SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign);
-    let (reference, clicks) = scene.reference(config.tracker.threshold, config.tracker.window_deg);
-    let calibration = calibrate(config, &reference, &clicks)?;
-    let tracker = Tracker::new(&config.tracker, calibration, Some(config.cantilever));
-    let frames = SimSem::new(scene, Some(snapshots), clock);
-    let hand = HandModel {
-        press_direction_haptic: teleop.haptic_from_stage() * teleop.press_direction_stage,
-        spring_n_per_mm: teleop.spring_n_per_mm,
-        force_scale_n_per_nn: teleop.force_scale_n_per_nn,
-    };
-    let haptic = SimHaptic::new(Operator::new(config.sim.operator.clone(), hand));
+    if !haptic.has_force_feedback() {
+        tracing::warn!("{}: position only, no force feedback", haptic.name());
+    }
+    tracing::info!(
+        "devices: frames {}, stage {}, haptic {}",
+        frames.name(),
+        stage.name(),
+        haptic.name()
+    );
     Ok(Devices {
-        frames: Box::new(frames),
+        frames,
         estimator: Box::new(VisionEstimator(tracker)),
-        stage: Box::new(stage),
-        haptic: Box::new(haptic),
+        stage,
+        haptic,
     })
 }
 

@@ -7,5 +7,7 @@ pub mod config;
 pub mod daq;
 pub mod frames;
 pub mod haptic;
+pub mod open;
+pub mod probe;
 
 pub use clock::Clock;
