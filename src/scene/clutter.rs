@@ -116,47 +116,55 @@ impl Shading {
     }
 }
 
-/// Draws `spec.look.particles` particles into `out`.
+/// Draws `spec.look.particles` particles into `out`, on the background (as in the
+/// public samples, the substrate hides what lies behind it).
 pub fn particles(spec: &FrameSpec, rng: &mut Rng, out: &mut Vec<Particle>) {
     let scale = f64::from(spec.width) / 640.0;
     out.clear();
     for _ in 0..spec.look.particles {
         out.push(Particle {
-            centre: [
-                rng.uniform(0.0, f64::from(spec.width)),
-                rng.uniform(0.0, f64::from(spec.height)),
-            ],
+            centre: background_point(spec, rng),
             radius: 0.5 * rng.uniform(4.0, 30.0) * scale,
             level: (spec.look.background + rng.uniform(50.0, 165.0)).min(250.0),
         });
     }
 }
 
-/// Draws `spec.look.scratches` scratches into `out`.
+/// Draws `spec.look.scratches` scratches into `out`, centred on the background.
 pub fn scratches(spec: &FrameSpec, rng: &mut Rng, out: &mut Vec<Scratch>) {
     let scale = f64::from(spec.width) / 640.0;
     out.clear();
     for _ in 0..spec.look.scratches {
-        let centre = [
-            rng.uniform(0.0, f64::from(spec.width)),
-            rng.uniform(0.0, f64::from(spec.height)),
-        ];
+        let centre = background_point(spec, rng);
         let half = 0.5 * rng.uniform(80.0, 450.0) * scale;
         let (s, c) = rng.uniform(0.0, std::f64::consts::PI).sin_cos();
         out.push(Scratch {
             from: [centre[0] - half * c, centre[1] - half * s],
             to: [centre[0] + half * c, centre[1] + half * s],
             width: rng.uniform(1.5, 4.0) * scale,
-            contrast: rng.uniform(20.0, 65.0),
+            contrast: rng.uniform(25.0, 75.0),
         });
     }
 }
 
-/// The substrate as a polygon: everything below a straight edge `gap` below the apex,
-/// tilted by `substrate_tilt_deg`, reaching well beyond the frame.
-pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
+/// A uniformly random pixel position not on the substrate (a few tries, then anywhere).
+fn background_point(spec: &FrameSpec, rng: &mut Rng) -> [f64; 2] {
+    let mut p = [0.0; 2];
+    for _ in 0..8 {
+        p = [
+            rng.uniform(0.0, f64::from(spec.width)),
+            rng.uniform(0.0, f64::from(spec.height)),
+        ];
+        if spec.look.substrate.is_none() || substrate_depth(spec, p) < 0.0 {
+            break;
+        }
+    }
+    p
+}
+
+/// The substrate's edge: a point on it and its downward normal.
+fn substrate_edge(spec: &FrameSpec) -> ([f64; 2], [f64; 2], [f64; 2]) {
     let tilt = spec.substrate_tilt_deg.to_radians();
-    // Edge direction (screen, CCW tilt) and its downward normal.
     let along = [tilt.cos(), -tilt.sin()];
     let down = [tilt.sin(), tilt.cos()];
     let gap_px = spec.substrate_gap_um * spec.px_per_um();
@@ -164,6 +172,19 @@ pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
         spec.apex_px[0] + gap_px * down[0],
         spec.apex_px[1] + gap_px * down[1],
     ];
+    (on_edge, along, down)
+}
+
+/// How far below the substrate's edge `p` lies, pixels (negative above it).
+fn substrate_depth(spec: &FrameSpec, p: [f64; 2]) -> f64 {
+    let (on_edge, _, down) = substrate_edge(spec);
+    (p[0] - on_edge[0]) * down[0] + (p[1] - on_edge[1]) * down[1]
+}
+
+/// The substrate as a polygon: everything below a straight edge `gap` below the apex,
+/// tilted by `substrate_tilt_deg`, reaching well beyond the frame.
+pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
+    let (on_edge, along, down) = substrate_edge(spec);
     let reach = 4.0 * f64::from(spec.width.max(spec.height));
     out.clear();
     for (a, d) in [(-reach, 0.0), (reach, 0.0), (reach, reach), (-reach, reach)] {

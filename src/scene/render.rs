@@ -149,11 +149,11 @@ impl Renderer {
         let level0 = (look.probe - 0.5 * look.probe_ramp) as f32;
         let level = |x: usize| level0 + ramp * x as f32;
         let rim = look.outline as f32;
-        if rim != 0.0 {
+        if rim != 0.0 && look.outline_width_px > 0.0 {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, |x| {
                 level(x) + rim
             });
-            inset_polygon(&self.polygon, 1.0, &mut self.inset);
+            inset_polygon(&self.polygon, look.outline_width_px, &mut self.inset);
             paint_over(&mut self.raster, &self.inset, &mut self.canvas, w, level);
         } else {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, level);
