@@ -47,16 +47,14 @@ impl Shading {
         self.cell = SHADING_CELL_PX * w / 640.0;
         self.cols = (w / self.cell).ceil() as usize + 2;
         self.rows = (h / self.cell).ceil() as usize + 2;
-        let blobs: Vec<[f64; 4]> = (0..SHADING_BLOBS)
-            .map(|_| {
-                [
-                    rng.uniform(-0.2, 1.2) * w,
-                    rng.uniform(-0.2, 1.2) * h,
-                    rng.uniform(0.15, 0.4) * w,
-                    rng.sign() * rng.uniform(0.5, 1.0),
-                ]
-            })
-            .collect();
+        let blobs: [[f64; 4]; SHADING_BLOBS] = std::array::from_fn(|_| {
+            [
+                rng.uniform(-0.2, 1.2) * w,
+                rng.uniform(-0.2, 1.2) * h,
+                rng.uniform(0.15, 0.4) * w,
+                rng.sign() * rng.uniform(0.5, 1.0),
+            ]
+        });
         self.values.clear();
         for j in 0..self.rows {
             for i in 0..self.cols {
@@ -216,5 +214,45 @@ pub fn disc_polygon(p: &Particle, out: &mut Vec<[f64; 2]>) {
     for k in 0..n {
         let (s, c) = (std::f64::consts::TAU * k as f64 / n as f64).sin_cos();
         out.push([p.centre[0] + p.radius * c, p.centre[1] + p.radius * s]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::spec::Style;
+
+    #[test]
+    fn clutter_lies_on_the_background_not_the_substrate() {
+        let mut spec = FrameSpec::new(Style::Harsh, 0.0, 1);
+        spec.look.particles = 400;
+        spec.substrate_tilt_deg = 4.0;
+        let mut out = Vec::new();
+        particles(&spec, &mut Rng::new(5), &mut out);
+        let on_substrate = out
+            .iter()
+            .filter(|p| substrate_depth(&spec, p.centre) > 0.0)
+            .count();
+        // Eight tries each: only a tiny share may land on the substrate.
+        assert!(on_substrate <= 4, "{on_substrate} of 400");
+        assert!(out.iter().all(|p| (2.0..=15.0).contains(&p.radius)));
+    }
+
+    #[test]
+    fn shading_spans_background_plus_minus_amplitude() {
+        let spec = FrameSpec::new(Style::Clean, 0.0, 9);
+        let mut shading = Shading::default();
+        shading.generate(&spec, &mut Rng::new(3));
+        let (w, h) = (spec.width as usize, spec.height as usize);
+        let mut canvas = vec![0.0f32; w * h];
+        shading.fill(&mut canvas, w, &mut Vec::new());
+        let lo = canvas.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = canvas.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let (b, a) = (spec.look.background as f32, spec.look.shading as f32);
+        assert!(lo >= b - a - 1e-3 && hi <= b + a + 1e-3, "{lo}..{hi}");
+        assert!(hi - lo > a, "visible shading: {lo}..{hi}");
+        // Smooth: neighbouring pixels differ by a small fraction of a grey level.
+        let step = canvas.windows(2).map(|p| (p[1] - p[0]).abs()).take(w - 1);
+        assert!(step.fold(0.0f32, f32::max) < 0.5);
     }
 }
