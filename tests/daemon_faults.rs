@@ -188,6 +188,7 @@ impl HapticDevice for Haptic {
 
 fn gains() -> TeleopGains {
     TeleopGains {
+        gain_um_per_s_per_mm: Vector3::repeat(0.5),
         force_rate_n_per_s: 1e6,
         force_scale_n_per_nn: 1e-3,
         ..TeleopGains::default()

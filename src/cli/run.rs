@@ -169,4 +169,11 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
         "safety: {} stale events, {} faults",
         stats.safety.stale_events, stats.safety.faults
     );
+    let m = &stats.memory;
+    if let (Some(warm), Some(end)) = (m.rss_mb_after_warmup, m.rss_mb_end) {
+        eprintln!(
+            "memory: {warm:.1} MiB resident after warm-up, {end:.1} MiB at the end ({:+.2} MiB)",
+            end - warm
+        );
+    }
 }

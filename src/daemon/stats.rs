@@ -102,6 +102,51 @@ pub struct RunStats {
     pub frames: FrameStats,
     pub force: ForceStats,
     pub safety: SafetyStats,
+    /// Resident memory of the process (an addition to the daemon issue's schema).
+    pub memory: MemoryStats,
+}
+
+/// Resident set size, sampled once a second by the supervisor.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, Default)]
+pub struct MemoryStats {
+    /// At the end of the warm-up (the first 10 s); null for shorter runs.
+    pub rss_mb_after_warmup: Option<f64>,
+    pub rss_mb_end: Option<f64>,
+    pub rss_mb_max: Option<f64>,
+}
+
+/// Samples the resident set size: when warm-up ends, the largest, the last.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MemoryWatch {
+    stats: MemoryStats,
+}
+
+/// The warm-up after which memory must stay flat.
+pub const WARMUP_S: f64 = 10.0;
+
+impl MemoryWatch {
+    pub fn sample(&mut self, elapsed_s: f64) {
+        let Some(rss) = resident_mb() else { return };
+        let s = &mut self.stats;
+        if elapsed_s >= WARMUP_S && s.rss_mb_after_warmup.is_none() {
+            s.rss_mb_after_warmup = Some(rss);
+        }
+        s.rss_mb_end = Some(rss);
+        s.rss_mb_max = Some(s.rss_mb_max.map_or(rss, |m| m.max(rss)));
+    }
+
+    pub fn stats(&self) -> MemoryStats {
+        self.stats
+    }
+}
+
+/// This process's resident set size in MiB, from /proc/self/statm.
+pub fn resident_mb() -> Option<f64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: f64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    // SAFETY: sysconf has no preconditions.
+    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    Some(pages * page.max(1) as f64 / (1024.0 * 1024.0))
 }
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -215,10 +260,22 @@ mod tests {
                 stale_events: 0,
                 faults: 0,
             },
+            memory: MemoryStats::default(),
         };
         let json = serde_json::to_value(&stats).unwrap();
         assert_eq!(json["haptic_loop"]["period_us_p99"], 1010.5);
         assert!(json["force"]["true_peak_nN"].is_null());
         assert_eq!(json["frames"]["dropped"], 0);
+    }
+
+    #[test]
+    fn memory_watch_reads_this_process() {
+        let mut watch = MemoryWatch::default();
+        watch.sample(1.0);
+        let early = watch.stats();
+        assert!(early.rss_mb_after_warmup.is_none());
+        assert!(early.rss_mb_end.unwrap() > 0.5);
+        watch.sample(WARMUP_S + 1.0);
+        assert_eq!(watch.stats().rss_mb_after_warmup, watch.stats().rss_mb_end);
     }
 }

@@ -12,7 +12,9 @@ use tokio::sync::mpsc as async_mpsc;
 use super::haptic_loop::{HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
-use super::stats::{ForceStats, FrameStats, LoopStats, RunStats, SafetyStats};
+use super::stats::{
+    ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RunStats, SafetyStats,
+};
 use super::supervisor_health::Health;
 use super::telemetry::{self, Recorder};
 use super::PublishedEstimate;
@@ -273,6 +275,8 @@ async fn supervise(
     tracing::info!("nanoforce running: all devices up");
     let mut interval = tokio::time::interval(Duration::from_millis(100));
     let deadline = options.duration.map(|d| started + d);
+    let mut memory = MemoryWatch::default();
+    let mut next_memory_sample = started;
     let exit = loop {
         tokio::select! {
             _ = interval.tick() => {}
@@ -297,6 +301,10 @@ async fn supervise(
             &threads.events,
             options.status_line,
         );
+        if Instant::now() >= next_memory_sample {
+            memory.sample(started.elapsed().as_secs_f64());
+            next_memory_sample += Duration::from_secs(1);
+        }
         if deadline.is_some_and(|d| Instant::now() >= d) {
             break ExitReason::Duration;
         }
@@ -309,15 +317,17 @@ async fn supervise(
     }
     health.finish_status_line(options.status_line);
     let duration_s = started.elapsed().as_secs_f64();
+    memory.sample(duration_s);
     let (loop_report, tracker_report) = stop_threads(threads, &loop_shared, &pipeline_shared);
     let realtime = loop_report.as_ref().is_some_and(|r| r.realtime);
-    let stats = assemble_stats(
+    let mut stats = assemble_stats(
         duration_s,
         loop_report.as_ref(),
         tracker_report.as_ref(),
         &pipeline_shared,
         &loop_shared,
     );
+    stats.memory = memory.stats();
     Ok(Outcome {
         stats,
         exit,
@@ -432,6 +442,7 @@ fn assemble_stats(
                 |r| r.counters.faults,
             ),
         },
+        memory: MemoryStats::default(),
     }
 }
 
