@@ -70,6 +70,7 @@ fn config(device: &str) -> ComediConfig {
                 zero_v: 2.5,
             }),
         ],
+        axis_devices: [device, device, device].map(PathBuf::from),
     }
 }
 
@@ -241,4 +242,22 @@ fn child_errors() {
         ])
     );
     assert!(Path::new(&log.path).exists());
+
+    // z on a second board: both opened, both zeroed and closed.
+    let mut two = config("/fake/comedi0");
+    two.axis_devices[2] = PathBuf::from("/fake/comedi1");
+    std::env::remove_var("FAKE_COMEDI_FAIL_WRITES_AFTER");
+    let daq = ComediRate::open(&two).unwrap();
+    assert_eq!(
+        daq.name(),
+        "comedi:/fake/comedi0 (pci-6035e) + /fake/comedi1 (pci-6035e)"
+    );
+    let opened = log.take();
+    assert_eq!(
+        opened.iter().filter(|l| l.starts_with("open ")).count(),
+        2,
+        "{opened:?}"
+    );
+    drop(daq);
+    assert_eq!(log.take().iter().filter(|l| *l == "close").count(), 2);
 }

@@ -7,6 +7,9 @@
 //!   reloading alternately from load A (low time) and load B (high time) on the 20 MHz
 //!   timebase, so the pulse rate is `|v| * pulses_per_um`; a DIO line gives the sign.
 //!
+//! An axis may name its own board (`daq.<axis>.device`): a PCI-6034E has two counters,
+//! so a third step/direction axis needs a second board.
+//!
 //! `write_velocity` runs 1000 times a second: it allocates nothing and only talks to the
 //! board when an axis's raw output changes. `zero` (and `Drop`) always write: analog
 //! outputs at their zero voltage, counters disarmed, direction lines low.
@@ -41,13 +44,15 @@ struct Pulse {
 
 enum Axis {
     None,
-    Analog(Analog),
-    Pulse(Pulse),
+    /// (board index, output)
+    Analog(usize, Analog),
+    Pulse(usize, Pulse),
 }
 
 pub struct ComediRate {
     name: String,
-    device: Device,
+    /// One per distinct device path, in the order the axes name them.
+    boards: Vec<Device>,
     axes: [Axis; 3],
 }
 
@@ -66,24 +71,47 @@ fn write_error(e: ComediError) -> DaqError {
 }
 
 impl ComediRate {
-    /// Opens the board, checks every axis's subdevices and sets all outputs to zero.
+    /// Opens the board(s), checks every axis's subdevices and sets all outputs to zero.
     pub fn open(config: &ComediConfig) -> Result<ComediRate, DaqError> {
-        let shown = config.device.display().to_string();
-        let device = Device::open(&config.device).map_err(|e| open_error(&shown, e.message))?;
-        let board = device.board_name();
-        let name = format!("comedi:{shown} ({board})");
+        let mut boards: Vec<Device> = Vec::new();
+        let mut names: Vec<String> = Vec::new();
         let mut axes = [Axis::None, Axis::None, Axis::None];
-        for ((slot, axis), label) in axes.iter_mut().zip(&config.axes).zip(["x", "y", "z"]) {
-            let what = |e: String| open_error(&name, format!("daq.{label}: {e}"));
+        let wiring = config.axes.iter().zip(&config.axis_devices);
+        for ((slot, (axis, path)), label) in axes.iter_mut().zip(wiring).zip(["x", "y", "z"]) {
+            if *axis == AxisOutput::None {
+                continue;
+            }
+            let board = match boards
+                .iter()
+                .position(|b| b.path() == path.display().to_string())
+            {
+                Some(i) => i,
+                None => {
+                    let shown = path.display().to_string();
+                    let device = Device::open(path).map_err(|e| open_error(&shown, e.message))?;
+                    names.push(format!("{shown} ({})", device.board_name()));
+                    boards.push(device);
+                    boards.len() - 1
+                }
+            };
+            let device = &boards[board];
+            let what = |e: String| {
+                open_error(
+                    &format!("comedi:{}", names[board]),
+                    format!("daq.{label}: {e}"),
+                )
+            };
             *slot = match axis {
                 AxisOutput::None => Axis::None,
-                AxisOutput::Analog(a) => {
-                    Axis::Analog(open_analog(&device, &board, a).map_err(what)?)
-                }
-                AxisOutput::StepDir(s) => Axis::Pulse(open_pulse(&device, s).map_err(what)?),
+                AxisOutput::Analog(a) => Axis::Analog(
+                    board,
+                    open_analog(device, &device.board_name(), a).map_err(what)?,
+                ),
+                AxisOutput::StepDir(s) => Axis::Pulse(board, open_pulse(device, s).map_err(what)?),
             };
         }
-        let mut rate = ComediRate { name, device, axes };
+        let name = format!("comedi:{}", names.join(" + "));
+        let mut rate = ComediRate { name, boards, axes };
         rate.zero(0.0)?;
         Ok(rate)
     }
@@ -276,8 +304,8 @@ impl RateOutput for ComediRate {
         for (axis, &v) in self.axes.iter_mut().zip(velocity_um_s.iter()) {
             match axis {
                 Axis::None => Ok(()),
-                Axis::Analog(a) => a.write(&self.device, v, false),
-                Axis::Pulse(p) => p.write(&self.device, v),
+                Axis::Analog(b, a) => a.write(&self.boards[*b], v, false),
+                Axis::Pulse(b, p) => p.write(&self.boards[*b], v),
             }
             .map_err(write_error)?;
         }
@@ -290,8 +318,8 @@ impl RateOutput for ComediRate {
         for axis in &mut self.axes {
             let result = match axis {
                 Axis::None => Ok(()),
-                Axis::Analog(a) => a.write(&self.device, 0.0, true),
-                Axis::Pulse(p) => p.stop(&self.device),
+                Axis::Analog(b, a) => a.write(&self.boards[*b], 0.0, true),
+                Axis::Pulse(b, p) => p.stop(&self.boards[*b]),
             };
             if let Err(e) = result {
                 first.get_or_insert(e);

@@ -28,6 +28,7 @@ pub(crate) struct RawDaq {
 #[serde(deny_unknown_fields)]
 struct RawAxis {
     output: Option<String>,
+    device: Option<String>,
     subdevice: Option<i64>,
     channel: Option<i64>,
     range: Option<i64>,
@@ -48,6 +49,9 @@ pub struct ComediConfig {
     pub device: PathBuf,
     /// Stage axes x, y, z.
     pub axes: [AxisOutput; 3],
+    /// The board of each axis: `daq.<axis>.device`, else `daq.device` (a PCI-6034E has
+    /// two counters, so a third step/direction axis needs a second board).
+    pub axis_devices: [PathBuf; 3],
 }
 
 /// How one stage axis is driven.
@@ -105,20 +109,32 @@ impl RawDaq {
             only_for(check, "daq", "daq.backend = \"sim\"", &keys)?;
             return Ok(DaqBackend::Sim);
         }
-        let device = self.device.unwrap_or_else(|| "/dev/comedi0".into());
+        let device = PathBuf::from(self.device.unwrap_or_else(|| "/dev/comedi0".into()));
         let axes = [("x", self.x), ("y", self.y), ("z", self.z)];
         let mut out = [AxisOutput::None, AxisOutput::None, AxisOutput::None];
-        for (slot, (name, raw)) in out.iter_mut().zip(axes) {
+        let mut axis_devices = [device.clone(), device.clone(), device.clone()];
+        for ((slot, board), (name, raw)) in out.iter_mut().zip(&mut axis_devices).zip(axes) {
             let key = format!("daq.{name}");
             let raw = required(check, &format!("[{key}]"), backend, raw)?;
+            if let Some(d) = &raw.device {
+                if d.trim().is_empty() {
+                    return Err(check.invalid(
+                        &format!("{key}.device"),
+                        "\"\"",
+                        "must name a device",
+                    ));
+                }
+                *board = PathBuf::from(d);
+            }
             *slot = raw.validate(check, &key)?;
         }
         if out.iter().all(|a| *a == AxisOutput::None) {
             return Err(check.inconsistent("daq: every axis has output = \"none\"".into()));
         }
         Ok(DaqBackend::Comedi(ComediConfig {
-            device: PathBuf::from(device),
+            device,
             axes: out,
+            axis_devices,
         }))
     }
 }
@@ -255,6 +271,16 @@ mod tests {
         assert_eq!((y.counter_subdevice, y.direction_channel), (11, 1));
         assert_eq!((y.pulses_per_um, y.max_rate_hz), (50.0, 100_000.0));
         assert_eq!(c.axes[2], AxisOutput::None);
+        assert_eq!(c.axis_devices[1], PathBuf::from("/dev/comedi0"));
+        let second = AXES.replace("[daq.y]\n", "[daq.y]\ndevice = \"/dev/comedi1\"\n");
+        let cfg = parse(&format!("[daq]\nbackend = \"comedi\"\n{second}")).unwrap();
+        let DaqBackend::Comedi(c) = cfg.devices.daq else {
+            panic!("not comedi")
+        };
+        assert_eq!(
+            c.axis_devices.map(|d| d.display().to_string()),
+            ["/dev/comedi0", "/dev/comedi1", "/dev/comedi0"]
+        );
     }
 
     #[test]
