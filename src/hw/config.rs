@@ -29,7 +29,7 @@ pub enum FramesBackend {
 #[derive(Debug, Clone, PartialEq)]
 pub enum DaqBackend {
     Sim,
-    Comedi(ComediConfig),
+    Comedi(Box<ComediConfig>),
 }
 
 /// The operator's device.

@@ -131,11 +131,11 @@ impl RawDaq {
         if out.iter().all(|a| *a == AxisOutput::None) {
             return Err(check.inconsistent("daq: every axis has output = \"none\"".into()));
         }
-        Ok(DaqBackend::Comedi(ComediConfig {
+        Ok(DaqBackend::Comedi(Box::new(ComediConfig {
             device,
             axes: out,
             axis_devices,
-        }))
+        })))
     }
 }
 
