@@ -199,3 +199,16 @@ fn run_drives_a_fake_comedi_board_and_leaves_it_at_zero() {
         ]
     );
 }
+
+#[test]
+fn the_lab_example_config_is_valid() {
+    use nanoforce::hw::config::{DaqBackend, FramesBackend, HapticBackend};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/lab.example.toml");
+    let cfg = nanoforce::config::Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(cfg.devices.frames, FramesBackend::V4l2(_)));
+    assert!(matches!(cfg.devices.haptic, HapticBackend::OpenHaptics(_)));
+    let DaqBackend::Comedi(daq) = &cfg.devices.daq else {
+        panic!("comedi expected")
+    };
+    assert_eq!(daq.axis_devices[2], Path::new("/dev/comedi1"));
+}
