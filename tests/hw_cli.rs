@@ -210,5 +210,9 @@ fn the_lab_example_config_is_valid() {
     let DaqBackend::Comedi(daq) = &cfg.devices.daq else {
         panic!("comedi expected")
     };
-    assert_eq!(daq.axis_devices[2], Path::new("/dev/comedi1"));
+    assert_eq!(daq.axis_devices[2], Path::new("/dev/comedi0"));
+    assert!(matches!(
+        daq.axes[2],
+        nanoforce::hw::daq::config::AxisOutput::StepDir(_)
+    ));
 }

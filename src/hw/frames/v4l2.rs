@@ -224,7 +224,7 @@ impl FrameSource for V4l2Source {
         let timeout_ms = self.config.timeout_ms;
         loop {
             let Some(stream) = &self.stream else {
-                unreachable!("opened above")
+                return Err(self.error("the device is not open".into()));
             };
             match stream.device.poll(timeout_ms.min(i32::MAX as u64) as i32) {
                 Ok(true) => {}
@@ -270,7 +270,7 @@ impl FrameSource for V4l2Source {
                 None => Err(format!("buffer index {} out of range", buffer.index)),
             };
             let Some(stream) = &self.stream else {
-                unreachable!("opened above")
+                return Err(self.error("the device is not open".into()));
             };
             // SAFETY: QBUF takes the v4l2_buffer DQBUF gave us.
             if let Err(e) = unsafe { stream.device.ioctl(sys::VIDIOC_QBUF, &mut buffer) } {
