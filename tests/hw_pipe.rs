@@ -91,7 +91,7 @@ fn fifo_frames_gaps_timeout_restart_and_resync() {
         assert_frame(&frame, meta.sequence);
         let age_s = clock.now_s() - meta.captured_s;
         assert!(
-            (0.0..0.25).contains(&age_s),
+            (0.0..0.5).contains(&age_s),
             "capture time from the header: {age_s} s ago"
         );
         sequences.push(meta.sequence);
@@ -114,7 +114,7 @@ fn fifo_frames_gaps_timeout_restart_and_resync() {
     );
     let waited = started.elapsed();
     assert!(
-        waited >= Duration::from_millis(290) && waited < Duration::from_millis(600),
+        waited >= Duration::from_millis(290) && waited < Duration::from_millis(2000),
         "{waited:?}"
     );
 

@@ -147,8 +147,8 @@ static int dqbuf(struct v4l2_buffer *b) {
     while (dropped(sequence)) sequence++;
     fill(best);
     bufs[best].queued = 0;
-    struct timespec now;
-    clock_gettime(CLOCK_MONOTONIC, &now);
+    /* Stamped with the frame's scheduled end, as a driver stamps the end of a frame. */
+    struct timespec now = next_frame;
     memset(b, 0, sizeof *b);
     b->index = (unsigned)best;
     b->type = V4L2_BUF_TYPE_VIDEO_CAPTURE;

@@ -51,6 +51,21 @@ impl Fake {
     }
 }
 
+/// The first error `read` gives within a second (the servo thread records it).
+fn first_error(mut read: impl FnMut() -> Result<(), HapticError>) -> HapticError {
+    let start = Instant::now();
+    loop {
+        if let Err(e) = read() {
+            return e;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(1),
+            "no error reported"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
 /// Polls `cond` for up to a second.
 fn eventually(what: &str, mut cond: impl FnMut() -> bool) {
     let start = Instant::now();
@@ -124,10 +139,10 @@ fn phantom_through_a_fake_libhd() {
 
     // A force limit trips: forces go off at once, the daemon hears a device error.
     fake.raise(0x0201);
+    let err = first_error(|| dev.read(now(Instant::now())).map(drop));
     eventually("forces off", || {
         fake.rendered() == [0.0; 3] && !fake.state().0
     });
-    let err = dev.read(now(Instant::now())).unwrap_err();
     assert!(matches!(err, HapticError::Device { .. }), "{err:?}");
     let msg = err.to_string();
     assert!(
@@ -144,8 +159,8 @@ fn phantom_through_a_fake_libhd() {
 
     // A communication error is a lost device.
     fake.raise(0x0302);
+    let err = first_error(|| dev.read(now(Instant::now())).map(drop));
     eventually("forces off", || !fake.state().0);
-    let err = dev.read(now(Instant::now())).unwrap_err();
     assert!(matches!(err, HapticError::Lost { .. }), "{err:?}");
 
     // The servo loop stops: reported as lost after stall_ms.

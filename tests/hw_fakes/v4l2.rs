@@ -77,7 +77,7 @@ fn child_capture() {
         assert_pattern(&frame, meta.sequence - 1);
         let age_s = clock.now_s() - meta.captured_s;
         assert!(
-            (0.0..0.02).contains(&age_s),
+            (0.0..0.1).contains(&age_s),
             "kernel timestamp on our clock: {age_s} s old"
         );
         sequences.push(meta.sequence);
@@ -90,7 +90,7 @@ fn child_capture() {
     );
     let mean_period_s = (times[9] - times[0]) / 9.0;
     assert!(
-        (mean_period_s - 0.005).abs() < 0.001,
+        (mean_period_s - 0.005).abs() < 1e-6,
         "200 Hz asked for: {mean_period_s}"
     );
     drop(source);
