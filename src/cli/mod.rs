@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 pub mod calibrate;
 mod model;
 pub mod replay;
+pub mod report;
 pub mod run;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
@@ -35,6 +36,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Refine clicked tip edges on a reference frame; print the calibration block.
     Calibrate(calibrate::CalibrateArgs),
+    /// Write an HTML report (plots, thumbnails, accuracy) about a replayed or recorded session.
+    Report(report::ReportArgs),
     Model(model::ModelArgs),
 }
 
@@ -45,6 +48,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Run(args) => run::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Report(args) => report::run(args),
         Command::Model(args) => model::run(args),
     }
 }

@@ -4,3 +4,4 @@
 pub mod frames;
 pub mod metadata;
 pub mod results;
+pub mod score;
