@@ -12,6 +12,7 @@
 //! - [`hw`]: devices behind small traits, each with a simulated backend.
 //! - [`sim`]: the simulated lab (stage, contact, SEM, operator).
 //! - [`daemon`]: the real-time teleoperation daemon.
+//! - [`monitor`]: the daemon's live web page and recorded thumbnails.
 //! - [`session`]: recorded sessions on disk (frames, SEM metadata, results, scoring).
 //! - [`report`]: the HTML report about a session, with its plots.
 //! - [`config`]: TOML files -> validated [`config::Config`].
@@ -22,6 +23,7 @@ pub mod control;
 pub mod daemon;
 pub mod hw;
 pub mod model;
+pub mod monitor;
 pub mod report;
 pub mod scene;
 pub mod session;

@@ -137,15 +137,20 @@ fn from_recording(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<Str
     (out, None)
 }
 
-/// The frame shrunk to [`THUMB_WIDTH`] with the estimate drawn on the small picture (so
-/// the edges stay two pixels wide).
+/// The frame shrunk to [`THUMB_WIDTH`] with the estimate drawn on the small picture.
 pub fn overlay_thumbnail(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
-    if frame.width() <= THUMB_WIDTH {
+    overlay_at_width(frame, estimate, THUMB_WIDTH)
+}
+
+/// The frame shrunk to `width` (never enlarged) with the estimate drawn on the small
+/// picture, so the edges stay two pixels wide.
+pub fn overlay_at_width(frame: &GrayImage, estimate: &Estimate, width: u32) -> RgbImage {
+    if frame.width() <= width || width == 0 {
         return draw_overlay(frame, estimate);
     }
-    let k = f64::from(THUMB_WIDTH) / f64::from(frame.width());
+    let k = f64::from(width) / f64::from(frame.width());
     let h = ((f64::from(frame.height()) * k).round() as u32).max(1);
-    let small = imageops::resize(frame, THUMB_WIDTH, h, FilterType::Triangle);
+    let small = imageops::resize(frame, width, h, FilterType::Triangle);
     // Pixel centres: x_small = (x + 0.5) k - 0.5.
     let map = |p: [f64; 2]| p.map(|v| (v + 0.5) * k - 0.5);
     let mut scaled = *estimate;
