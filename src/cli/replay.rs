@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::config::Config;
 use crate::daemon::lab::tracker_from_config;
 use crate::session::frames::{list_frames, load_gray};
-use crate::session::metadata::read_sem_metadata;
+use crate::session::metadata::{read_sem_metadata, SemMetadata};
 use crate::session::results;
 use crate::vision::{draw_overlay, Tracker};
 
@@ -119,15 +119,7 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
         let name = path
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().to_string());
-        let sem = read_sem_metadata(path);
-        summary.with_scale += usize::from(sem.pixel_size_um.is_some());
-        if !sem.warnings.is_empty() {
-            summary.metadata_warnings += 1;
-            if summary.metadata_warnings <= METADATA_WARNINGS_SHOWN {
-                let text = sem.warnings.join("; ");
-                progress.suspend(|| tracing::warn!("{}: SEM metadata: {text}", path.display()));
-            }
-        }
+        let sem = frame_metadata(path, &mut summary, &progress);
         match load_gray(path) {
             Ok(image) => {
                 let started = Instant::now();
@@ -157,6 +149,21 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
     times_ms.sort_by(f64::total_cmp);
     summary.median_ms = times_ms.get(times_ms.len() / 2).copied();
     Ok(summary)
+}
+
+/// The SEM metadata of one frame; problems are warned about (the first few in full) and
+/// counted.
+fn frame_metadata(path: &Path, summary: &mut ReplaySummary, progress: &ProgressBar) -> SemMetadata {
+    let sem = read_sem_metadata(path);
+    summary.with_scale += usize::from(sem.pixel_size_um.is_some());
+    if !sem.warnings.is_empty() {
+        summary.metadata_warnings += 1;
+        if summary.metadata_warnings <= METADATA_WARNINGS_SHOWN {
+            let text = sem.warnings.join("; ");
+            progress.suspend(|| tracing::warn!("{}: SEM metadata: {text}", path.display()));
+        }
+    }
+    sem
 }
 
 fn write_overlay(dir: &Path, frame: &Path, overlay: &image::RgbImage) -> anyhow::Result<()> {

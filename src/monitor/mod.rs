@@ -59,6 +59,19 @@ impl MonitorHandle {
     }
 }
 
+/// Nice 10 for this thread (Linux: per thread), so the tracker and the frame source win
+/// the CPU over drawing and serving pictures.
+fn lower_priority() {
+    // SAFETY: plain syscalls on the calling thread; no memory is passed.
+    let result = unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 10)
+    };
+    if result != 0 {
+        tracing::debug!("monitor: could not lower its priority");
+    }
+}
+
 /// Starts the `monitor` thread. Binding the listen address happens here, so a port in
 /// use is an error of the daemon's start, not a silent missing page.
 pub fn start(
@@ -107,6 +120,7 @@ fn run(
     mut producer: Producer,
     stop: &AtomicBool,
 ) {
+    lower_priority();
     let runtime = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
