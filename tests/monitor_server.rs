@@ -51,10 +51,7 @@ fn monitor_serves_caps_pages_and_keeps_thumbnails() {
         &format!("listen = \"127.0.0.1:{port}\"\nmax_clients = 2\nthumbnail_every_s = 1.0"),
     );
     let mut daemon = start_daemon(dir.path(), &config, 7.0);
-    assert!(
-        wait_for_port(port, Duration::from_secs(15)),
-        "monitor never listened"
-    );
+    wait_for_monitor(&mut daemon, port);
 
     let (head, page) = http_get(port, "/", &format!("127.0.0.1:{port}"));
     let page = String::from_utf8_lossy(&page);

@@ -12,6 +12,8 @@ use imageproc::drawing::{
 use imageproc::pixelops::interpolate;
 use imageproc::rect::Rect;
 
+use crate::session::score::percentile;
+
 pub const BLUE: Rgb<u8> = Rgb([31, 119, 180]);
 pub const ORANGE: Rgb<u8> = Rgb([255, 127, 14]);
 pub const GREEN: Rgb<u8> = Rgb([44, 160, 44]);
@@ -107,7 +109,8 @@ pub fn histogram(
     let mut img = RgbImage::from_pixel(width, height, WHITE);
     let mut v: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
     v.sort_by(f64::total_cmp);
-    let quantile = |q: f64| v.get(((v.len() - 1) as f64 * q).round() as usize).copied();
+    // numpy's linear percentile, as the summary table quotes them.
+    let quantile = |q: f64| (!v.is_empty()).then(|| percentile(&v, 100.0 * q));
     let (Some(lo), Some(hi)) = (v.first().copied(), quantile(0.995)) else {
         text(&mut img, LEFT, TOP, &format!("{title}: no data"), INK);
         return img;

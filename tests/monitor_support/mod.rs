@@ -20,15 +20,44 @@ pub fn free_port() -> u16 {
         .port()
 }
 
-/// The built-in simulated lab with `[monitor]` appended, written to `dir/lab.toml`.
+/// The built-in simulated lab with the `key = value` lines of `monitor` set in its
+/// `[monitor]` section, written to `dir/lab.toml`.
 pub fn lab_config(dir: &Path, monitor: &str) -> PathBuf {
-    let text = format!(
-        "{}\n[monitor]\n{monitor}\n",
-        nanoforce::cli::run::SIM_CONFIG
-    );
+    let keys: Vec<&str> = monitor
+        .lines()
+        .filter_map(|l| l.split('=').next())
+        .map(str::trim)
+        .collect();
+    let mut text = String::new();
+    for line in nanoforce::cli::run::SIM_CONFIG.lines() {
+        let key = line.split('=').next().unwrap_or("").trim();
+        if keys.contains(&key) {
+            continue;
+        }
+        text.push_str(line);
+        text.push('\n');
+        if line.trim() == "[monitor]" {
+            text.push_str(monitor);
+            text.push('\n');
+        }
+    }
+    assert!(text.contains(monitor), "sim.toml has a [monitor] section");
     let path = dir.join("lab.toml");
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// Waits for the daemon's monitor on `port`; on failure, the daemon's error output.
+pub fn wait_for_monitor(daemon: &mut Child, port: u16) {
+    if wait_for_port(port, Duration::from_secs(15)) {
+        return;
+    }
+    let _ = daemon.kill();
+    let mut err = String::new();
+    if let Some(mut stderr) = daemon.stderr.take() {
+        let _ = stderr.read_to_string(&mut err);
+    }
+    panic!("the monitor never listened on {port}:\n{err}");
 }
 
 /// Waits until something accepts connections on `port`.
