@@ -16,6 +16,7 @@ use crate::control::{RawSafety, RawTeleop, TeleopGains};
 use crate::daemon::config::{DaemonConfig, RawDaemon};
 use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
+use crate::monitor::config::{MonitorConfig, RawMonitor};
 use crate::sim::config::{RawSim, SimConfig};
 
 /// Default half-width of the Hough search window around each calibrated edge, degrees.
@@ -54,6 +55,8 @@ pub struct Config {
     /// `[frames]`, `[daq]`, `[haptic]`: which backend drives each device.
     pub devices: DevicesConfig,
     pub daemon: DaemonConfig,
+    /// `[monitor]`: the live web page (off by default) and recorded thumbnails.
+    pub monitor: MonitorConfig,
     /// `[sim]`: the simulated lab, used by every `"sim"` backend.
     pub sim: SimConfig,
 }
@@ -117,6 +120,7 @@ struct RawConfig {
     daq: Option<RawDevice>,
     haptic: Option<RawDevice>,
     daemon: Option<RawDaemon>,
+    monitor: Option<RawMonitor>,
     sim: Option<RawSim>,
 }
 
@@ -188,6 +192,7 @@ impl Config {
             &check,
         )?;
         let daemon = DaemonConfig::validate(raw.daemon.unwrap_or_default(), &check)?;
+        let monitor = MonitorConfig::validate(raw.monitor.unwrap_or_default(), &check)?;
         let sim = SimConfig::validate(raw.sim.unwrap_or_default(), &check)?;
         Ok(Config {
             path: path.to_path_buf(),
@@ -196,6 +201,7 @@ impl Config {
             teleop,
             devices,
             daemon,
+            monitor,
             sim,
         })
     }

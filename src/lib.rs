@@ -12,6 +12,9 @@
 //! - [`hw`]: devices behind small traits, each with a simulated backend.
 //! - [`sim`]: the simulated lab (stage, contact, SEM, operator).
 //! - [`daemon`]: the real-time teleoperation daemon.
+//! - [`monitor`]: the daemon's live web page and recorded thumbnails.
+//! - [`session`]: recorded sessions on disk (frames, SEM metadata, results, scoring).
+//! - [`report`]: the HTML report about a session, with its plots.
 //! - [`config`]: TOML files -> validated [`config::Config`].
 //! - [`cli`]: the command-line front end over the library.
 pub mod cli;
@@ -20,6 +23,8 @@ pub mod control;
 pub mod daemon;
 pub mod hw;
 pub mod model;
+pub mod monitor;
+pub mod report;
 pub mod scene;
 pub mod session;
 pub mod sim;

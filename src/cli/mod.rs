@@ -8,6 +8,7 @@ pub mod calibrate;
 mod model;
 pub mod probe_devices;
 pub mod replay;
+pub mod report;
 pub mod run;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
@@ -36,6 +37,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Refine clicked tip edges on a reference frame; print the calibration block.
     Calibrate(calibrate::CalibrateArgs),
+    /// Write an HTML report (plots, thumbnails, accuracy) about a replayed or recorded session.
+    Report(report::ReportArgs),
     Model(model::ModelArgs),
     /// Open each configured device once and list what this machine offers.
     ProbeDevices(probe_devices::ProbeArgs),
@@ -48,6 +51,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Run(args) => run::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Report(args) => report::run(args),
         Command::Model(args) => model::run(args),
         Command::ProbeDevices(args) => probe_devices::run(args),
     }

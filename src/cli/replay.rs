@@ -13,6 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::config::Config;
 use crate::daemon::lab::tracker_from_config;
 use crate::session::frames::{list_frames, load_gray};
+use crate::session::metadata::{read_sem_metadata, SemMetadata};
 use crate::session::results;
 use crate::vision::{draw_overlay, Tracker};
 
@@ -26,9 +27,12 @@ the replay.\n\n\
 CSV columns: frame (file name), detected (1/0), angle_deg (tip rotation from the \
 reference, CCW on screen), force_nN (signed as the angle), tip_x, tip_y (the apex, pixels; \
 x right, y down) - empty when not detected - then confidence, scale (frame pixels per \
-reference pixel), force_saturated, red/blue/green_support (edge pixels), miss (why not \
-detected) and, with --timing, processing_ms. Without --timing the CSV is identical from \
-run to run.",
+reference pixel), force_saturated, red/blue/green_support (edge pixels), px_per_um, \
+magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
+34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
+red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
+pixels), miss (why not detected) and, with --timing, processing_ms. Without --timing the \
+CSV is identical from run to run.",
     after_help = "Example:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
 python3 score.py session/truth.csv out.csv"
 )]
@@ -59,8 +63,15 @@ pub struct ReplaySummary {
     pub frames: usize,
     pub detected: usize,
     pub unreadable: usize,
+    /// Frames whose SEM metadata gave a pixel size.
+    pub with_scale: usize,
+    /// Frames whose SEM metadata had something wrong with it.
+    pub metadata_warnings: usize,
     pub median_ms: Option<f64>,
 }
+
+/// Metadata warnings printed in full; later ones are only counted.
+const METADATA_WARNINGS_SHOWN: usize = 5;
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let config = Config::load(&args.config)?;
@@ -68,10 +79,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     tracker.set_coherence(!args.no_coherence);
     let summary = replay(&mut tracker, &args)?;
     eprintln!(
-        "replayed {} frames: {} detected, {} unreadable; median {} ms per frame (tracking)",
+        "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,
         summary.detected,
         summary.unreadable,
+        summary.with_scale,
+        match summary.metadata_warnings {
+            0 => String::new(),
+            n => format!(" ({n} with metadata warnings)"),
+        },
         summary
             .median_ms
             .map_or("-".into(), |ms| format!("{ms:.2}")),
@@ -95,12 +111,15 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
         frames: frames.len(),
         detected: 0,
         unreadable: 0,
+        with_scale: 0,
+        metadata_warnings: 0,
         median_ms: None,
     };
     for path in &frames {
         let name = path
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().to_string());
+        let sem = frame_metadata(path, &mut summary, &progress);
         match load_gray(path) {
             Ok(image) => {
                 let started = Instant::now();
@@ -108,7 +127,8 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
                 let ms = started.elapsed().as_secs_f64() * 1e3;
                 times_ms.push(ms);
                 summary.detected += usize::from(estimate.detected);
-                results::write_row(&mut csv, &name, &estimate, args.timing.then_some(ms))?;
+                let ms_column = args.timing.then_some(ms);
+                results::write_row(&mut csv, &name, &estimate, &sem, ms_column)?;
                 if let Some(dir) = &args.overlay {
                     write_overlay(dir, path, &draw_overlay(&image, &estimate))?;
                 }
@@ -129,6 +149,21 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
     times_ms.sort_by(f64::total_cmp);
     summary.median_ms = times_ms.get(times_ms.len() / 2).copied();
     Ok(summary)
+}
+
+/// The SEM metadata of one frame; problems are warned about (the first few in full) and
+/// counted.
+fn frame_metadata(path: &Path, summary: &mut ReplaySummary, progress: &ProgressBar) -> SemMetadata {
+    let sem = read_sem_metadata(path);
+    summary.with_scale += usize::from(sem.pixel_size_um.is_some());
+    if !sem.warnings.is_empty() {
+        summary.metadata_warnings += 1;
+        if summary.metadata_warnings <= METADATA_WARNINGS_SHOWN {
+            let text = sem.warnings.join("; ");
+            progress.suspend(|| tracing::warn!("{}: SEM metadata: {text}", path.display()));
+        }
+    }
+    sem
 }
 
 fn write_overlay(dir: &Path, frame: &Path, overlay: &image::RgbImage) -> anyhow::Result<()> {

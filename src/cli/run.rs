@@ -96,6 +96,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         notifier: Notifier::from_env().context("connecting to systemd's NOTIFY_SOCKET")?,
         stop_when_frames_end: false,
         clock,
+        monitor: Some(config.monitor.clone()),
     };
     let handle = Daemon::start(config.teleop.clone(), devices, options)?;
     let outcome = handle.wait()?;

@@ -5,6 +5,7 @@
 use anyhow::Context;
 use image::GrayImage;
 
+use super::snapshot::EdgeSegments;
 use super::{Devices, Estimator, FrameEstimate};
 use crate::config::{CalibrationConfig, Config};
 use crate::hw::config::FramesBackend;
@@ -27,6 +28,16 @@ pub struct VisionEstimator(pub Tracker);
 impl Estimator for VisionEstimator {
     fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate {
         from_estimate(&self.0.track(frame))
+    }
+
+    fn estimate_with_edges(
+        &mut self,
+        frame: &GrayImage,
+        edges: &mut EdgeSegments,
+    ) -> FrameEstimate {
+        let e = self.0.track(frame);
+        *edges = e.edges.map(|f| f.map(|f| [f.start_px, f.end_px]));
+        from_estimate(&e)
     }
 }
 

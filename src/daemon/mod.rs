@@ -5,6 +5,8 @@
 //! - `tracker`: the vision tracker turns the newest frame into a published estimate;
 //! - `haptic-loop`: the 1 kHz loop (stylus -> law -> force and S100 rate command);
 //! - `telemetry`: drains the loops' records into the session folder;
+//! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
+//!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
 //! - the supervisor, on a small tokio runtime: signals (SIGINT/SIGTERM stop, SIGHUP
 //!   reloads the gains), systemd notifications and watchdog, the status line.
 //!
@@ -17,6 +19,7 @@ pub mod lab;
 pub mod notify;
 pub mod pipeline;
 pub mod rt;
+pub mod snapshot;
 pub mod stats;
 mod supervisor;
 mod supervisor_health;

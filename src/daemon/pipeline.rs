@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use image::GrayImage;
 
+use super::snapshot::{EdgeSegments, SnapshotTap};
 use super::stats::{ForceErrors, Histogram};
 use super::{FrameEstimate, PublishedEstimate};
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
@@ -21,6 +22,17 @@ use crate::hw::Clock;
 /// Turns a frame into a force estimate (the vision tracker, or a test double).
 pub trait Estimator: Send {
     fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate;
+
+    /// Like [`Estimator::estimate`], and writes the found edge segments into `edges` for
+    /// pictures (the monitor page, thumbnails). Default: no edges.
+    fn estimate_with_edges(
+        &mut self,
+        frame: &GrayImage,
+        edges: &mut EdgeSegments,
+    ) -> FrameEstimate {
+        *edges = [None; 3];
+        self.estimate(frame)
+    }
 }
 
 /// A frame in the slot, with when it became available to the tracker.
@@ -134,6 +146,8 @@ pub struct TrackerSide {
     pub frames: triple_buffer::Output<TimedFrame>,
     pub estimates: triple_buffer::Input<PublishedEstimate>,
     pub telemetry: rtrb::Producer<EstimateRecord>,
+    /// Copies for the monitor and thumbnails (see [`super::snapshot`]), when wanted.
+    pub snapshots: Option<SnapshotTap>,
 }
 
 /// Runs the tracker loop on the calling thread (spawned by the supervisor as `tracker`).
@@ -146,6 +160,7 @@ pub fn run_tracker(
     let mut latency_ms = Histogram::new(0.01, 1000.0);
     let mut force: Option<ForceErrors> = None;
     let mut seq = 0u64;
+    let mut edges: EdgeSegments = [None; 3];
     while !shared.stop.load(Ordering::Relaxed) {
         if !side.frames.update() {
             thread::park_timeout(Duration::from_millis(20));
@@ -153,7 +168,7 @@ pub fn run_tracker(
         }
         let frame = side.frames.output_buffer_mut();
         let started_s = clock.now_s();
-        let estimate = estimator.estimate(&frame.image);
+        let estimate = estimator.estimate_with_edges(&frame.image, &mut edges);
         let published_s = clock.now_s();
         seq += 1;
         let published = PublishedEstimate::new(seq, &frame.meta, published_s, &estimate);
@@ -170,6 +185,9 @@ pub fn run_tracker(
             if published.detected {
                 errors.record_error(published.force_nn, truth.force_nn);
             }
+        }
+        if let Some(tap) = side.snapshots.as_mut() {
+            tap.offer(published_s, &frame.image, &published, &edges);
         }
         let _ = side.telemetry.push(EstimateRecord {
             estimate: published,

@@ -1,5 +1,6 @@
 //! The supervisor: starts the loops, watches them, talks to systemd, handles signals,
 //! and on the way out makes sure the outputs are at zero before it reports.
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::{mpsc, Arc};
@@ -12,6 +13,7 @@ use tokio::sync::mpsc as async_mpsc;
 use super::haptic_loop::{HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
+use super::snapshot::snapshot_channel;
 use super::stats::{
     ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RunStats, SafetyStats,
 };
@@ -23,6 +25,7 @@ use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
+use crate::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
 
 /// The opened devices and the tracker, ready to run.
 pub struct Devices {
@@ -50,6 +53,8 @@ pub struct RunOptions {
     pub stop_when_frames_end: bool,
     /// The clock the frame source stamps frames with; the loops use the same one.
     pub clock: Clock,
+    /// The live page and the recorded thumbnails (`[monitor]`); None: neither.
+    pub monitor: Option<MonitorConfig>,
 }
 
 impl Default for RunOptions {
@@ -64,6 +69,7 @@ impl Default for RunOptions {
             notifier: Notifier::disabled(),
             stop_when_frames_end: false,
             clock: Clock::start(),
+            monitor: None,
         }
     }
 }
@@ -97,6 +103,8 @@ pub struct DaemonHandle {
     supervisor: JoinHandle<anyhow::Result<Outcome>>,
     pub loop_shared: Arc<LoopShared>,
     pub pipeline_shared: Arc<PipelineShared>,
+    /// Where the monitor page is served, when it is.
+    pub monitor_addr: Option<SocketAddr>,
 }
 
 impl DaemonHandle {
@@ -134,6 +142,7 @@ struct Threads {
     )>,
     events: mpsc::Sender<String>,
     gains: rtrb::Producer<TeleopGains>,
+    monitor: Option<MonitorHandle>,
 }
 
 impl Daemon {
@@ -148,7 +157,7 @@ impl Daemon {
         let loop_shared = Arc::new(LoopShared::default());
         let pipeline_shared = Arc::new(PipelineShared::default());
         let (commands, commands_rx) = async_mpsc::unbounded_channel();
-        let threads = spawn_threads(
+        let mut threads = spawn_threads(
             gains,
             devices,
             &options,
@@ -156,6 +165,7 @@ impl Daemon {
             loop_shared.clone(),
             pipeline_shared.clone(),
         )?;
+        let monitor_addr = threads.monitor.as_mut().and_then(|m| m.local_addr);
         let supervisor = {
             let loop_shared = loop_shared.clone();
             let pipeline_shared = pipeline_shared.clone();
@@ -181,6 +191,7 @@ impl Daemon {
             supervisor,
             loop_shared,
             pipeline_shared,
+            monitor_addr,
         })
     }
 }
@@ -199,6 +210,20 @@ fn spawn_threads(
     let (est_tx, est_rx) = rtrb::RingBuffer::new(ESTIMATE_RING);
     let (gains_tx, gains_rx) = rtrb::RingBuffer::new(4);
     let (events_tx, events_rx) = mpsc::channel();
+    // The monitor first: it only reads, and a port in use stops the start right here.
+    let (snapshots, monitor) = match &options.monitor {
+        Some(config) if config.wants_snapshots(options.session_dir.is_some()) => {
+            let (tap, reader) = snapshot_channel(config.frame_hz);
+            let view = DaemonView {
+                loop_shared: loop_shared.clone(),
+                pipeline_shared: pipeline_shared.clone(),
+            };
+            let handle = monitor::start(config, reader, view, options.session_dir.clone())
+                .context("starting the monitor")?;
+            (Some(tap), Some(handle))
+        }
+        _ => (None, None),
+    };
 
     let recorder = match &options.session_dir {
         Some(dir) => {
@@ -222,6 +247,7 @@ fn spawn_threads(
             frames: frames_out,
             estimates: estimates_in,
             telemetry: est_tx,
+            snapshots,
         };
         let estimator = devices.estimator;
         thread::Builder::new()
@@ -257,6 +283,7 @@ fn spawn_threads(
         recorder,
         events: events_tx,
         gains: gains_tx,
+        monitor,
     })
 }
 
@@ -381,6 +408,9 @@ fn stop_threads(
     pipeline_shared.stop.store(true, Ordering::Relaxed);
     threads.tracker.thread().unpark();
     let tracker_report = threads.tracker.join().ok();
+    if let Some(monitor) = threads.monitor {
+        monitor.stop();
+    }
     // A frame source may be blocked in a read (a pipe): give it a moment, then leave it.
     let deadline = Instant::now() + Duration::from_secs(1);
     while !threads.frames.is_finished() && Instant::now() < deadline {

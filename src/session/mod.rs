@@ -1,4 +1,7 @@
 //! Recorded sessions on disk (scene.md's layout): listing and decoding the frames of a
-//! folder, and the results CSV that `replay` writes and `score.py` reads.
+//! folder, the SEM's scale metadata in TIFF frames, the results CSV that `replay` writes
+//! and `score.py` reads, and scoring results against a session's truth.
 pub mod frames;
+pub mod metadata;
 pub mod results;
+pub mod score;

@@ -1,16 +1,24 @@
 //! The results CSV of a replay: one row per frame. The first six columns are fixed
 //! (`frame, detected, angle_deg, force_nN, tip_x, tip_y`, empty when not detected), the
-//! rest describe the estimate. Without timing the file is a pure function of the frames
-//! and the configuration: a replay run twice gives byte-identical output.
+//! rest describe the estimate: confidence, scale, the edges' support, the SEM's scale
+//! from the frame's metadata (`px_per_um`, `magnification`, the apex in micrometres:
+//! empty without metadata), the found edge segments (`red_x0,red_y0,red_x1,red_y1`, ...
+//! in frame pixels, for pictures) and `miss`. Without timing the file is a pure function
+//! of the frames and the configuration: a replay run twice gives byte-identical output.
+//! [`read_results`] reads it back (for `report`).
 use std::io::{self, Write};
+use std::path::{Path, PathBuf};
 
-use crate::vision::{Edge, Estimate, Miss};
+use super::metadata::SemMetadata;
+use crate::vision::{Edge, EdgeFit, Estimate, Miss};
 
 /// The header; `timing` adds `processing_ms` (which varies from run to run).
 pub fn header(timing: bool) -> String {
     let mut h = String::from(
         "frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence,scale,force_saturated,\
-         red_support,blue_support,green_support,miss",
+         red_support,blue_support,green_support,px_per_um,magnification,tip_x_um,tip_y_um,\
+         red_x0,red_y0,red_x1,red_y1,blue_x0,blue_y0,blue_x1,blue_y1,\
+         green_x0,green_y0,green_x1,green_y1,miss",
     );
     if timing {
         h.push_str(",processing_ms");
@@ -28,11 +36,12 @@ pub fn miss_name(miss: Option<Miss>) -> &'static str {
     }
 }
 
-/// One row for a tracked frame.
+/// One row for a tracked frame; `sem` is the frame's metadata (may be empty).
 pub fn write_row(
     out: &mut impl Write,
     frame: &str,
     e: &Estimate,
+    sem: &SemMetadata,
     processing_ms: Option<f64>,
 ) -> io::Result<()> {
     let fixed = |v: Option<f64>, digits: usize| match v.filter(|v| v.is_finite() && e.detected) {
@@ -42,7 +51,7 @@ pub fn write_row(
     let support = |edge: Edge| e.edges[edge.index()].map_or(0, |f| f.support);
     write!(
         out,
-        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{}",
+        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
         csv_field(frame),
         u8::from(e.detected),
         fixed(e.angle_deg, 6),
@@ -55,6 +64,8 @@ pub fn write_row(
         support(Edge::Red),
         support(Edge::Blue),
         support(Edge::Green),
+        scale_columns(e, sem),
+        edge_columns(&e.edges),
         miss_name(e.miss),
     )?;
     if let Some(ms) = processing_ms {
@@ -63,9 +74,48 @@ pub fn write_row(
     writeln!(out)
 }
 
+/// `px_per_um,magnification,tip_x_um,tip_y_um`.
+fn scale_columns(e: &Estimate, sem: &SemMetadata) -> String {
+    let opt = |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
+    let px_per_um = sem.px_per_um();
+    let apex_um = match (e.detected.then_some(e.apex_px).flatten(), px_per_um) {
+        (Some(a), Some(k)) => [Some(a[0] / k), Some(a[1] / k)],
+        _ => [None, None],
+    };
+    format!(
+        "{},{},{},{}",
+        opt(px_per_um, 5),
+        opt(sem.magnification, 1),
+        opt(apex_um[0], 4),
+        opt(apex_um[1], 4)
+    )
+}
+
+/// The 12 edge columns: start and end of red, blue, green (empty when not found).
+fn edge_columns(edges: &[Option<EdgeFit>; 3]) -> String {
+    let mut cells = Vec::with_capacity(12);
+    for e in Edge::ALL {
+        match &edges[e.index()] {
+            Some(fit) => {
+                let [x0, y0] = fit.start_px;
+                let [x1, y1] = fit.end_px;
+                cells.extend([x0, y0, x1, y1].map(|v| format!("{v:.2}")));
+            }
+            None => cells.extend(std::iter::repeat_n(String::new(), 4)),
+        }
+    }
+    cells.join(",")
+}
+
 /// A row for a frame that could not be decoded: not detected, reason in `miss`.
 pub fn write_unreadable(out: &mut impl Write, frame: &str, timing: bool) -> io::Result<()> {
-    write!(out, "{},0,,,,,0.0000,,0,0,0,0,unreadable", csv_field(frame))?;
+    write!(
+        out,
+        "{},0,,,,,0.0000,,0,0,0,0{}unreadable",
+        csv_field(frame),
+        // the 4 scale and 12 edge columns, empty
+        ",".repeat(17)
+    )?;
     if timing {
         write!(out, ",")?;
     }
@@ -81,6 +131,125 @@ fn csv_field(s: &str) -> String {
     }
 }
 
+/// One row of a results CSV as read back; columns the file lacks are empty.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ResultRow {
+    pub frame: String,
+    pub detected: bool,
+    pub angle_deg: Option<f64>,
+    pub force_nn: Option<f64>,
+    pub tip_px: Option<[f64; 2]>,
+    pub confidence: Option<f64>,
+    pub px_per_um: Option<f64>,
+    pub magnification: Option<f64>,
+    /// Start and end of red, blue, green, frame pixels.
+    pub edges: [Option<[[f64; 2]; 2]>; 3],
+    pub miss: String,
+    pub processing_ms: Option<f64>,
+}
+
+/// A results CSV that cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultsError {
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a results CSV: {reason}")]
+    Format { path: PathBuf, reason: String },
+}
+
+/// Reads a results CSV (replay's, or any with at least `frame` and `detected`).
+pub fn read_results(path: &Path) -> Result<Vec<ResultRow>, ResultsError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ResultsError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_results(&text).map_err(|reason| ResultsError::Format {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// Parses results CSV text.
+pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let header = split_csv_line(lines.next().ok_or("the file is empty")?);
+    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let (Some(frame), Some(detected)) = (col("frame"), col("detected")) else {
+        return Err("no `frame` and `detected` columns".into());
+    };
+    let names = [
+        "angle_deg",
+        "force_nN",
+        "tip_x",
+        "tip_y",
+        "confidence",
+        "px_per_um",
+        "magnification",
+        "processing_ms",
+    ];
+    let cols = names.map(col);
+    let edge_cols: Vec<[Option<usize>; 4]> = Edge::ALL
+        .iter()
+        .map(|e| ["x0", "y0", "x1", "y1"].map(|k| col(&format!("{}_{k}", e.name()))))
+        .collect();
+    let miss = col("miss");
+    let mut rows = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let cells = split_csv_line(line);
+        let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
+        let num = |i: Option<usize>| cell(i).parse::<f64>().ok().filter(|v| v.is_finite());
+        let flag = cell(Some(detected));
+        if !matches!(flag, "0" | "1" | "true" | "false") {
+            return Err(format!("row {}: detected is {flag:?}, not 1/0", k + 2));
+        }
+        let [angle, force, tx, ty, conf, ppu, mag, ms] = cols;
+        let mut edges = [None; 3];
+        for (slot, c) in edges.iter_mut().zip(&edge_cols) {
+            if let [Some(x0), Some(y0), Some(x1), Some(y1)] = c.map(num) {
+                *slot = Some([[x0, y0], [x1, y1]]);
+            }
+        }
+        rows.push(ResultRow {
+            frame: cell(Some(frame)).to_string(),
+            detected: matches!(flag, "1" | "true"),
+            angle_deg: num(angle),
+            force_nn: num(force),
+            tip_px: num(tx).zip(num(ty)).map(|(x, y)| [x, y]),
+            confidence: num(conf),
+            px_per_um: num(ppu),
+            magnification: num(mag),
+            edges,
+            miss: cell(miss).to_string(),
+            processing_ms: num(ms),
+        });
+    }
+    Ok(rows)
+}
+
+/// The fields of one CSV line (RFC 4180 quoting, no embedded newlines).
+pub fn split_csv_line(line: &str) -> Vec<String> {
+    let mut fields = Vec::new();
+    let mut field = String::new();
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut field)),
+            _ => field.push(c),
+        }
+    }
+    fields.push(field);
+    fields
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,23 +257,89 @@ mod tests {
     #[test]
     fn undetected_rows_have_empty_values() {
         let mut out = Vec::new();
+        let sem = SemMetadata {
+            pixel_size_um: Some(0.1),
+            magnification: Some(2000.0),
+            ..SemMetadata::default()
+        };
         write_row(
             &mut out,
             "f.png",
             &Estimate::missed(Miss::Inconsistent, 0.2),
+            &sem,
             None,
         )
         .unwrap();
         assert_eq!(
             String::from_utf8(out).unwrap(),
-            "f.png,0,,,,,0.2000,,0,0,0,0,inconsistent\n"
+            format!(
+                "f.png,0,,,,,0.2000,,0,0,0,0,10.00000,2000.0,,,{}inconsistent\n",
+                ",".repeat(12)
+            )
         );
         let mut out = Vec::new();
         write_unreadable(&mut out, "a,b.png", true).unwrap();
-        assert_eq!(
-            String::from_utf8(out).unwrap(),
-            "\"a,b.png\",0,,,,,0.0000,,0,0,0,0,unreadable,\n"
-        );
-        assert_eq!(header(false).split(',').count(), 13);
+        let line = String::from_utf8(out).unwrap();
+        assert!(line.ends_with(",unreadable,\n"), "{line}");
+        let columns = header(true).split(',').count();
+        assert_eq!(columns, 30);
+        assert_eq!(split_csv_line(line.trim_end()).len(), columns);
+        let rows = parse_results(&format!("{}\n{line}", header(true))).unwrap();
+        assert_eq!(rows[0].frame, "a,b.png");
+        assert!(!rows[0].detected && rows[0].tip_px.is_none());
+        assert_eq!(rows[0].miss, "unreadable");
+    }
+
+    #[test]
+    fn detected_rows_read_back_with_apex_in_micrometres_and_edges() {
+        let fit = |a: [f64; 2], b: [f64; 2]| EdgeFit {
+            start_px: a,
+            end_px: b,
+            support: 40,
+            contrast: 50.0,
+        };
+        let estimate = Estimate {
+            detected: true,
+            angle_deg: Some(-2.5),
+            force_nn: Some(-700.25),
+            force_saturated: false,
+            apex_px: Some([320.5, 240.25]),
+            edges: [
+                Some(fit([300.0, 200.0], [100.0, 150.0])),
+                None,
+                Some(fit([320.5, 240.25], [340.0, 210.0])),
+            ],
+            scale: Some(1.0),
+            confidence: 0.9,
+            miss: None,
+        };
+        let sem = SemMetadata {
+            pixel_size_um: Some(0.05),
+            magnification: Some(4000.0),
+            ..SemMetadata::default()
+        };
+        let mut out = header(true).into_bytes();
+        out.push(b'\n');
+        write_row(&mut out, "f.tif", &estimate, &sem, Some(3.25)).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let row = text.lines().nth(1).unwrap();
+        assert!(row.contains(",20.00000,4000.0,16.0250,12.0125,"), "{row}");
+        let r = &parse_results(&text).unwrap()[0];
+        assert!(r.detected);
+        assert_eq!(r.angle_deg, Some(-2.5));
+        assert_eq!(r.tip_px, Some([320.5, 240.25]));
+        assert_eq!(r.px_per_um, Some(20.0));
+        assert_eq!(r.edges[0], Some([[300.0, 200.0], [100.0, 150.0]]));
+        assert_eq!(r.edges[1], None);
+        assert_eq!(r.edges[2], Some([[320.5, 240.25], [340.0, 210.0]]));
+        assert_eq!(r.processing_ms, Some(3.25));
+    }
+
+    #[test]
+    fn malformed_csv_is_an_error() {
+        assert!(parse_results("").is_err());
+        assert!(parse_results("a,b\n1,2\n").unwrap_err().contains("frame"));
+        let err = parse_results("frame,detected\nf.png,maybe\n").unwrap_err();
+        assert!(err.contains("row 2"), "{err}");
     }
 }

@@ -56,6 +56,7 @@ struct RawOperator {
     hold_s: Option<f64>,
     retract_s: Option<f64>,
     rest_s: Option<f64>,
+    give_up_s: Option<f64>,
     hand_stiffness_n_per_mm: Option<f64>,
     stylus_mass_kg: Option<f64>,
 }
@@ -168,6 +169,7 @@ impl SimConfig {
             hold_s: pos("sim.operator.hold_s", o.hold_s, od.hold_s)?,
             retract_s: pos("sim.operator.retract_s", o.retract_s, od.retract_s)?,
             rest_s: pos("sim.operator.rest_s", o.rest_s, od.rest_s)?,
+            give_up_s: pos("sim.operator.give_up_s", o.give_up_s, od.give_up_s)?,
             hand_stiffness_n_per_mm: pos(
                 "sim.operator.hand_stiffness_n_per_mm",
                 o.hand_stiffness_n_per_mm,

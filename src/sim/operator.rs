@@ -21,6 +21,10 @@ pub struct OperatorParams {
     pub hold_s: f64,
     pub retract_s: f64,
     pub rest_s: f64,
+    /// An approach or press that gets nowhere for this long is abandoned: the hand
+    /// re-centres the stylus (which re-engages a latched motion block) and starts again,
+    /// as a person would.
+    pub give_up_s: f64,
     /// The hand's grip on the stylus.
     pub hand_stiffness_n_per_mm: f64,
     pub stylus_mass_kg: f64,
@@ -37,6 +41,7 @@ impl Default for OperatorParams {
             hold_s: 2.0,
             retract_s: 6.0,
             rest_s: 1.0,
+            give_up_s: 12.0,
             hand_stiffness_n_per_mm: 0.6,
             stylus_mass_kg: 0.05,
         }
@@ -172,6 +177,7 @@ impl Operator {
             Phase::Centre if in_phase >= 0.5 => Some(Phase::Approach),
             Phase::Approach if felt >= p.touch_nn => Some(Phase::Press),
             Phase::Press if felt >= p.target_force_nn => Some(Phase::Hold),
+            Phase::Approach | Phase::Press if in_phase >= p.give_up_s => Some(Phase::Rest),
             Phase::Hold if in_phase >= p.hold_s => Some(Phase::Retract),
             Phase::Retract if in_phase >= p.retract_s => Some(Phase::Rest),
             Phase::Rest if in_phase >= p.rest_s => {
@@ -244,5 +250,26 @@ mod tests {
         op.advance(9.9);
         assert_eq!(op.phase(), Phase::Approach);
         assert_eq!(op.cycles, 1);
+    }
+
+    #[test]
+    fn a_blocked_approach_is_abandoned_and_retried_from_the_centre() {
+        let mut op = operator();
+        op.advance(0.0);
+        op.advance(0.6);
+        assert_eq!(op.phase(), Phase::Approach);
+        // Nothing is felt (motion blocked): after give_up_s the hand re-centres.
+        op.advance(0.6 + 12.0);
+        assert_eq!(op.phase(), Phase::Rest);
+        for i in 1..=1000 {
+            op.advance(12.6 + i as f64 * 1e-3);
+        }
+        assert!(
+            op.position_mm().norm() < 0.5,
+            "back at the centre: {}",
+            op.position_mm()
+        );
+        op.advance(13.7);
+        assert_eq!(op.phase(), Phase::Approach);
     }
 }

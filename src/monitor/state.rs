@@ -1,0 +1,270 @@
+//! The monitor's producer, stepped every [`super::UPDATE_PERIOD`] on the monitor thread:
+//! drains the tracker's estimates into the force history, takes the newest frame
+//! snapshot (draws its overlay for the page, keeps a thumbnail for the recording), turns
+//! the loops' counters into rates, and hands one JSON update to every live page.
+use std::collections::VecDeque;
+use std::io::Cursor;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Instant;
+
+use image::{GrayImage, ImageFormat, RgbImage};
+use serde_json::json;
+
+use super::server::Hub;
+use super::DaemonView;
+use crate::daemon::snapshot::{FrameSnapshot, SnapshotReader};
+use crate::report::thumbs::{overlay_at_width, THUMB_WIDTH};
+use crate::vision::{EdgeFit, Estimate};
+
+/// Seconds of force history a new page starts with.
+const HISTORY_S: f64 = 30.0;
+/// Widest overlay the page gets, pixels.
+const PAGE_FRAME_WIDTH: u32 = 800;
+/// Most thumbnails a recording keeps: past it, every other one goes and the interval
+/// doubles, so a day-long run stays small.
+const MAX_THUMBNAILS: usize = 240;
+
+pub struct Producer {
+    reader: SnapshotReader,
+    view: DaemonView,
+    hub: Arc<Hub>,
+    serve: bool,
+    history: VecDeque<[f64; 2]>,
+    fresh: Vec<[f64; 2]>,
+    frame: Option<serde_json::Value>,
+    rates: Rates,
+    thumbnails: Option<Thumbnails>,
+    steps: u64,
+}
+
+/// Counters at the last rate computation.
+struct Rates {
+    at: Instant,
+    counts: [u64; 4],
+    json: serde_json::Value,
+}
+
+impl Producer {
+    pub fn new(
+        reader: SnapshotReader,
+        view: DaemonView,
+        hub: Arc<Hub>,
+        thumbnails: Option<(PathBuf, f64)>,
+        serve: bool,
+    ) -> Self {
+        Producer {
+            reader,
+            view,
+            hub,
+            serve,
+            history: VecDeque::new(),
+            fresh: Vec::new(),
+            frame: None,
+            rates: Rates {
+                at: Instant::now(),
+                counts: [0; 4],
+                json: serde_json::Value::Null,
+            },
+            thumbnails: thumbnails.map(|(dir, every_s)| Thumbnails::new(dir, every_s)),
+            steps: 0,
+        }
+    }
+
+    /// One update.
+    pub fn step(&mut self) {
+        self.steps += 1;
+        while let Ok(e) = self.reader.estimates.pop() {
+            let force = if e.detected { e.force_nn } else { f64::NAN };
+            self.fresh.push([e.frame_time_s, force]);
+        }
+        if self.reader.frames.update() && self.reader.frames.output_buffer_mut().image.width() > 0 {
+            self.take_frame();
+        }
+        self.update_rates();
+        if self.serve {
+            self.publish();
+        }
+        let newest = self.fresh.last().map(|p| p[0]);
+        self.history.extend(self.fresh.drain(..));
+        if let Some(t) = newest {
+            while self.history.front().is_some_and(|p| p[0] < t - HISTORY_S) {
+                self.history.pop_front();
+            }
+        }
+    }
+
+    fn take_frame(&mut self) {
+        let snapshot = self.reader.frames.output_buffer_mut();
+        let estimate = estimate_of(snapshot);
+        let e = &snapshot.estimate;
+        self.frame = Some(json!({
+            "seq": e.frame_sequence,
+            "t": e.frame_time_s,
+            "detected": e.detected,
+            "angle_deg": e.angle_deg,
+            "force_nn": e.force_nn,
+            "confidence": e.confidence,
+            "width": snapshot.image.width(),
+            "height": snapshot.image.height(),
+        }));
+        if self.serve {
+            let width = snapshot.image.width().min(PAGE_FRAME_WIDTH);
+            if let Some(png) = png(&overlay_at_width(&snapshot.image, &estimate, width)) {
+                self.hub.set_frame(png);
+            }
+        }
+        if let Some(thumbnails) = &mut self.thumbnails {
+            thumbnails.offer(&snapshot.image, &estimate, e.frame_sequence);
+        }
+    }
+
+    fn update_rates(&mut self) {
+        let now = Instant::now();
+        let span = (now - self.rates.at).as_secs_f64();
+        if span < 1.0 && !self.rates.json.is_null() {
+            return;
+        }
+        let l = &self.view.loop_shared;
+        let p = &self.view.pipeline_shared;
+        let counts = [
+            l.ticks.load(Ordering::Relaxed),
+            p.received.load(Ordering::Relaxed),
+            p.tracked.load(Ordering::Relaxed),
+            p.detected.load(Ordering::Relaxed),
+        ];
+        let d: Vec<f64> = counts
+            .iter()
+            .zip(self.rates.counts)
+            .map(|(now, then)| now.saturating_sub(then) as f64)
+            .collect();
+        let span = span.max(1e-3);
+        self.rates = Rates {
+            at: now,
+            counts,
+            json: json!({
+                "haptic_hz": d[0] / span,
+                "frames_hz": d[1] / span,
+                "tracked_hz": d[2] / span,
+                "detected_pct": if d[2] > 0.0 { 100.0 * d[3] / d[2] } else { 0.0 },
+            }),
+        };
+    }
+
+    fn publish(&mut self) {
+        let l = &self.view.loop_shared;
+        let p = &self.view.pipeline_shared;
+        let state = l.state();
+        let update = json!({
+            "force": self.fresh,
+            "state": state.as_str(),
+            "fault": state.is_fault(),
+            "rates": self.rates.json,
+            "counters": {
+                "overruns": l.overruns.load(Ordering::Relaxed),
+                "dropped_frames": p.dropped.load(Ordering::Relaxed)
+                    + p.source_dropped.load(Ordering::Relaxed),
+                "stale_events": l.stale_events.load(Ordering::Relaxed),
+                "faults": l.faults.load(Ordering::Relaxed),
+            },
+            "frame": self.frame,
+            "clients": self.hub.clients(),
+            "dropped_updates": self.hub.dropped_updates.load(Ordering::Relaxed),
+        });
+        self.hub.broadcast(&update.to_string());
+        // A new page starts from the history; refreshing it twice a second is plenty.
+        if self.steps % 5 == 0 {
+            let history: Vec<[f64; 2]> = self.history.iter().chain(&self.fresh).copied().collect();
+            self.hub
+                .set_hello(json!({ "force": history, "history_s": HISTORY_S }).to_string());
+        }
+    }
+}
+
+/// The estimate a snapshot describes, for drawing.
+fn estimate_of(s: &FrameSnapshot) -> Estimate {
+    let e = &s.estimate;
+    let apex = Some(e.apex_px).filter(|a| e.detected && a.iter().all(|v| v.is_finite()));
+    Estimate {
+        detected: e.detected,
+        angle_deg: Some(e.angle_deg).filter(|a| a.is_finite()),
+        force_nn: Some(e.force_nn).filter(|f| f.is_finite()),
+        force_saturated: false,
+        apex_px: apex,
+        edges: s.edges.map(|seg| {
+            seg.map(|[a, b]| EdgeFit {
+                start_px: a,
+                end_px: b,
+                support: 0,
+                contrast: 0.0,
+            })
+        }),
+        scale: None,
+        confidence: e.confidence,
+        miss: None,
+    }
+}
+
+fn png(image: &RgbImage) -> Option<Vec<u8>> {
+    let mut out = Vec::new();
+    image
+        .write_to(&mut Cursor::new(&mut out), ImageFormat::Png)
+        .ok()?;
+    Some(out)
+}
+
+/// The recording's `thumbnails/` folder.
+struct Thumbnails {
+    dir: PathBuf,
+    every_s: f64,
+    next: Instant,
+    written: Vec<PathBuf>,
+    failed: bool,
+}
+
+impl Thumbnails {
+    fn new(dir: PathBuf, every_s: f64) -> Self {
+        Thumbnails {
+            dir,
+            every_s,
+            next: Instant::now(),
+            written: Vec::new(),
+            failed: false,
+        }
+    }
+
+    fn offer(&mut self, frame: &GrayImage, estimate: &Estimate, sequence: u64) {
+        let now = Instant::now();
+        if self.failed || now < self.next {
+            return;
+        }
+        self.next = now + std::time::Duration::from_secs_f64(self.every_s);
+        let path = self.dir.join(format!("frame_{sequence:07}.png"));
+        let written = std::fs::create_dir_all(&self.dir)
+            .map_err(|e| e.to_string())
+            .and_then(|()| {
+                overlay_at_width(frame, estimate, THUMB_WIDTH)
+                    .save(&path)
+                    .map_err(|e| e.to_string())
+            });
+        if let Err(e) = written {
+            tracing::warn!("{}: {e}; no more thumbnails this run", path.display());
+            self.failed = true;
+            return;
+        }
+        self.written.push(path);
+        if self.written.len() >= MAX_THUMBNAILS {
+            let mut keep = Vec::with_capacity(MAX_THUMBNAILS / 2 + 1);
+            for (k, p) in self.written.drain(..).enumerate() {
+                if k % 2 == 0 {
+                    keep.push(p);
+                } else {
+                    let _ = std::fs::remove_file(&p);
+                }
+            }
+            self.written = keep;
+            self.every_s *= 2.0;
+        }
+    }
+}

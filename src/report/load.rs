@@ -1,0 +1,257 @@
+//! Reading a session folder for the report, in either of its two shapes:
+//!
+//! - **replayed**: scene.md's layout (`probe.toml`, `reference.png`, `frames/`, maybe
+//!   `truth.csv`) plus the CSV `nanoforce replay` wrote, by default `replay.csv` in the
+//!   folder. Time comes from `truth.csv`'s `t_s` when there is one, else the frame index.
+//! - **recorded** by `nanoforce run`: `estimates.csv` (one row per tracked frame, time
+//!   `frame_time_s`), `stats.json`, `events.log` and, when the run recorded them,
+//!   overlay thumbnails in `thumbnails/`.
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use super::ReportError;
+use crate::session::results::{read_results, split_csv_line, ResultRow};
+use crate::session::score::{read_truth, score, Score, TruthRow};
+
+/// One tracked frame, whichever shape the session has.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameRow {
+    /// The frame's file name (replayed) or `frame <seq>` (recorded).
+    pub name: String,
+    /// Seconds, or the frame index when the session has no times.
+    pub t: f64,
+    pub detected: bool,
+    pub angle_deg: Option<f64>,
+    pub force_nn: Option<f64>,
+    pub confidence: Option<f64>,
+    pub processing_ms: Option<f64>,
+    pub true_force_nn: Option<f64>,
+    /// From truth.csv (replayed synthetic sessions).
+    pub true_angle_deg: Option<f64>,
+    pub tip_px: Option<[f64; 2]>,
+    pub edges: [Option<[[f64; 2]; 2]>; 3],
+    pub px_per_um: Option<f64>,
+    pub magnification: Option<f64>,
+    /// The frame's sequence number (recorded sessions).
+    pub frame_seq: Option<u64>,
+}
+
+/// Which shape the session has.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Kind {
+    Replayed { csv: PathBuf, frames_dir: PathBuf },
+    Recorded,
+}
+
+/// Everything the report shows.
+#[derive(Debug, Clone)]
+pub struct SessionData {
+    pub dir: PathBuf,
+    pub kind: Kind,
+    pub rows: Vec<FrameRow>,
+    /// True when `t` is seconds (else frame indices).
+    pub timed: bool,
+    pub score: Option<Score>,
+    pub stats: Option<serde_json::Value>,
+    pub events: Vec<String>,
+}
+
+/// Reads `dir`; `csv` overrides where a replayed session's results are.
+pub fn load(dir: &Path, csv: Option<&Path>) -> Result<SessionData, ReportError> {
+    if !dir.is_dir() {
+        return Err(ReportError::NotASession {
+            dir: dir.to_path_buf(),
+            reason: "no such folder".into(),
+        });
+    }
+    let estimates = dir.join("estimates.csv");
+    if csv.is_none() && estimates.is_file() {
+        return load_recorded(dir, &estimates);
+    }
+    let csv = csv.map_or_else(|| dir.join("replay.csv"), Path::to_path_buf);
+    if !csv.is_file() {
+        return Err(ReportError::NotASession {
+            dir: dir.to_path_buf(),
+            reason: format!(
+                "neither estimates.csv (a recording of `nanoforce run`) nor {} (the CSV of \
+                 `nanoforce replay`; give another with --csv)",
+                csv.display()
+            ),
+        });
+    }
+    load_replayed(dir, &csv)
+}
+
+fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
+    let results = read_results(csv)?;
+    let truth_path = dir.join("truth.csv");
+    let truth = if truth_path.is_file() {
+        Some(read_truth(&truth_path)?)
+    } else {
+        None
+    };
+    let by_name: HashMap<&str, &TruthRow> = truth
+        .iter()
+        .flatten()
+        .map(|t| (t.frame.as_str(), t))
+        .collect();
+    let truth_of = |r: &ResultRow| by_name.get(r.frame.as_str()).copied();
+    let timed = !results.is_empty()
+        && results
+            .iter()
+            .all(|r| truth_of(r).is_some_and(|t| t.t_s.is_some()));
+    let rows = results
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let t = truth_of(r);
+            let mut row = replayed_row(
+                r,
+                t.and_then(|t| t.t_s).filter(|_| timed).unwrap_or(k as f64),
+            );
+            if let Some(t) = t.filter(|t| t.detected) {
+                row.true_angle_deg = Some(t.angle_deg).filter(|a| a.is_finite());
+                row.true_force_nn = Some(t.force_nn).filter(|f| f.is_finite());
+            }
+            row
+        })
+        .collect();
+    Ok(SessionData {
+        dir: dir.to_path_buf(),
+        kind: Kind::Replayed {
+            csv: csv.to_path_buf(),
+            frames_dir: dir.join("frames"),
+        },
+        rows,
+        timed,
+        score: truth.as_ref().map(|t: &Vec<TruthRow>| score(t, &results)),
+        stats: None,
+        events: Vec::new(),
+    })
+}
+
+fn replayed_row(r: &ResultRow, t: f64) -> FrameRow {
+    FrameRow {
+        name: r.frame.clone(),
+        t,
+        detected: r.detected,
+        angle_deg: r.angle_deg.filter(|_| r.detected),
+        force_nn: r.force_nn.filter(|_| r.detected),
+        confidence: r.confidence,
+        processing_ms: r.processing_ms,
+        true_force_nn: None,
+        true_angle_deg: None,
+        tip_px: r.tip_px.filter(|_| r.detected),
+        edges: r.edges,
+        px_per_um: r.px_per_um,
+        magnification: r.magnification,
+        frame_seq: None,
+    }
+}
+
+fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportError> {
+    let text = std::fs::read_to_string(estimates).map_err(|source| ReportError::Read {
+        path: estimates.to_path_buf(),
+        source,
+    })?;
+    let rows = parse_estimates(&text).map_err(|reason| ReportError::Format {
+        path: estimates.to_path_buf(),
+        reason,
+    })?;
+    let stats = std::fs::read_to_string(dir.join("stats.json"))
+        .ok()
+        .and_then(|s| serde_json::from_str(&s).ok());
+    let events = std::fs::read_to_string(dir.join("events.log"))
+        .map(|s| s.lines().map(str::to_string).collect())
+        .unwrap_or_default();
+    Ok(SessionData {
+        dir: dir.to_path_buf(),
+        kind: Kind::Recorded,
+        rows,
+        timed: true,
+        score: None,
+        stats,
+        events,
+    })
+}
+
+/// The daemon's `estimates.csv` (see `daemon::telemetry`).
+pub fn parse_estimates(text: &str) -> Result<Vec<FrameRow>, String> {
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let header = split_csv_line(lines.next().ok_or("the file is empty")?);
+    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let names = [
+        "frame_seq",
+        "frame_time_s",
+        "detected",
+        "angle_deg",
+        "force_nN",
+        "tip_x",
+        "tip_y",
+        "confidence",
+        "processing_ms",
+        "true_force_nN",
+    ];
+    let cols = names.map(col);
+    let [Some(seq), Some(time), Some(det), ..] = cols else {
+        return Err("no frame_seq, frame_time_s and detected columns".into());
+    };
+    let [_, _, _, angle, force, tx, ty, conf, ms, truth] = cols;
+    let mut rows = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let cells = split_csv_line(line);
+        let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
+        let num = |i: Option<usize>| cell(i).parse::<f64>().ok().filter(|v| v.is_finite());
+        let Some(t) = num(Some(time)) else {
+            return Err(format!(
+                "row {}: frame_time_s is {:?}",
+                k + 2,
+                cell(Some(time))
+            ));
+        };
+        let frame_seq = cell(Some(seq)).parse::<u64>().ok();
+        let detected = cell(Some(det)) == "1";
+        rows.push(FrameRow {
+            name: format!("frame {}", frame_seq.map_or("?".into(), |s| s.to_string())),
+            t,
+            detected,
+            angle_deg: num(angle).filter(|_| detected),
+            force_nn: num(force).filter(|_| detected),
+            confidence: num(conf),
+            processing_ms: num(ms),
+            true_force_nn: num(truth),
+            tip_px: num(tx)
+                .zip(num(ty))
+                .map(|(x, y)| [x, y])
+                .filter(|_| detected),
+            frame_seq,
+            ..FrameRow::default()
+        });
+    }
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn estimates_csv_rows() {
+        let text =
+            "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
+                    confidence,processing_ms,true_force_nN\n\
+                    1,3,0.050000,0.071000,1,-1.5,-420.5,300.5,200.25,0.9100,4.200,-400\n\
+                    2,4,0.066667,0.090000,0,,,,,0.1000,3.900,\n";
+        let rows = parse_estimates(text).unwrap();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(rows[0].frame_seq, Some(3));
+        assert_eq!(rows[0].force_nn, Some(-420.5));
+        assert_eq!(rows[0].tip_px, Some([300.5, 200.25]));
+        assert_eq!(rows[0].true_force_nn, Some(-400.0));
+        assert!(!rows[1].detected && rows[1].force_nn.is_none());
+        assert_eq!(rows[1].processing_ms, Some(3.9));
+        assert!(parse_estimates("a,b\n").is_err());
+        let bad = parse_estimates("frame_seq,frame_time_s,detected\n1,soon,1\n").unwrap_err();
+        assert!(bad.contains("row 2"), "{bad}");
+    }
+}

@@ -1,0 +1,216 @@
+//! The report's strip of overlay thumbnails: frames spread evenly over the session, each
+//! with its found edges in red, blue and green and the apex marked (the paper's Figure 8,
+//! [`crate::vision::draw_overlay`]).
+//!
+//! A replayed session draws them from its frames and the edge columns of the replay CSV
+//! (nothing is tracked again). A recorded session shows the thumbnails the daemon drew
+//! during the run (`thumbnails/frame_<seq>.png`, off the real-time threads); a recording
+//! without them has no strip, and the report says so.
+use std::path::Path;
+
+use image::imageops::{self, FilterType};
+use image::{GrayImage, Rgb, RgbImage};
+
+use super::load::{FrameRow, Kind, SessionData};
+use super::{force_unit, plot};
+use crate::session::frames::load_gray;
+use crate::vision::{draw_overlay, EdgeFit, Estimate};
+
+/// Width of one thumbnail, pixels.
+pub const THUMB_WIDTH: u32 = 320;
+
+/// One picture of the strip.
+#[derive(Debug, Clone)]
+pub struct Thumbnail {
+    pub image: RgbImage,
+    pub caption: String,
+}
+
+/// Up to `max` thumbnails, and a note when the strip is missing or incomplete.
+pub fn thumbnails(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<String>) {
+    match &data.kind {
+        Kind::Replayed { frames_dir, .. } => from_frames(data, frames_dir, max),
+        Kind::Recorded => from_recording(data, max),
+    }
+}
+
+/// `max` indices spread evenly over `0..n`, first and last included.
+pub fn spread(n: usize, max: usize) -> Vec<usize> {
+    match (n, max) {
+        (0, _) | (_, 0) => Vec::new(),
+        (n, m) if n <= m => (0..n).collect(),
+        (_, 1) => vec![0],
+        (n, m) => (0..m)
+            .map(|i| ((i * (n - 1)) as f64 / (m - 1) as f64).round() as usize)
+            .collect(),
+    }
+}
+
+fn from_frames(
+    data: &SessionData,
+    frames_dir: &Path,
+    max: usize,
+) -> (Vec<Thumbnail>, Option<String>) {
+    let mut out = Vec::new();
+    let mut missing = 0;
+    for k in spread(data.rows.len(), max) {
+        let row = &data.rows[k];
+        match load_gray(&frames_dir.join(&row.name)) {
+            Ok(frame) => out.push(Thumbnail {
+                image: overlay_thumbnail(&frame, &estimate_of(row)),
+                caption: caption(row, data.timed),
+            }),
+            Err(_) => missing += 1,
+        }
+    }
+    let note = (missing > 0).then(|| {
+        format!(
+            "{missing} thumbnail frame(s) could not be read from {}",
+            frames_dir.display()
+        )
+    });
+    (out, note)
+}
+
+/// The estimate a replay CSV row describes, for drawing.
+fn estimate_of(row: &FrameRow) -> Estimate {
+    let fit = |e: Option<[[f64; 2]; 2]>| {
+        e.map(|[a, b]| EdgeFit {
+            start_px: a,
+            end_px: b,
+            support: 0,
+            contrast: 0.0,
+        })
+    };
+    Estimate {
+        detected: row.detected,
+        angle_deg: row.angle_deg,
+        force_nn: row.force_nn,
+        force_saturated: false,
+        apex_px: row.tip_px,
+        edges: row.edges.map(fit),
+        scale: None,
+        confidence: row.confidence.unwrap_or(0.0),
+        miss: None,
+    }
+}
+
+fn from_recording(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<String>) {
+    let dir = data.dir.join("thumbnails");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "png"))
+                .collect()
+        })
+        .unwrap_or_default();
+    if files.is_empty() {
+        let note = "this recording has no thumbnails/ (the daemon draws them when \
+                    [monitor] thumbnail_every_s is above 0)";
+        return (Vec::new(), Some(note.into()));
+    }
+    files.sort();
+    let mut out = Vec::new();
+    for k in spread(files.len(), max) {
+        let path = &files[k];
+        let Ok(image) = image::open(path) else {
+            continue;
+        };
+        let seq = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.trim_start_matches("frame_").parse::<u64>().ok());
+        let row = data
+            .rows
+            .iter()
+            .find(|r| seq.is_some() && r.frame_seq == seq);
+        let caption = row.map_or_else(
+            || format!("frame {}", seq.map_or("?".into(), |s| s.to_string())),
+            |r| caption(r, true),
+        );
+        out.push(Thumbnail {
+            image: shrink(&image.into_rgb8()),
+            caption,
+        });
+    }
+    (out, None)
+}
+
+/// The frame shrunk to [`THUMB_WIDTH`] with the estimate drawn on the small picture.
+pub fn overlay_thumbnail(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
+    overlay_at_width(frame, estimate, THUMB_WIDTH)
+}
+
+/// The frame shrunk to `width` (never enlarged) with the estimate drawn on the small
+/// picture, so the edges stay two pixels wide.
+pub fn overlay_at_width(frame: &GrayImage, estimate: &Estimate, width: u32) -> RgbImage {
+    if frame.width() <= width || width == 0 {
+        return draw_overlay(frame, estimate);
+    }
+    let k = f64::from(width) / f64::from(frame.width());
+    let h = ((f64::from(frame.height()) * k).round() as u32).max(1);
+    let small = imageops::resize(frame, width, h, FilterType::Triangle);
+    // Pixel centres: x_small = (x + 0.5) k - 0.5.
+    let map = |p: [f64; 2]| p.map(|v| (v + 0.5) * k - 0.5);
+    let mut scaled = *estimate;
+    scaled.apex_px = estimate.apex_px.map(map);
+    for fit in scaled.edges.iter_mut().flatten() {
+        fit.start_px = map(fit.start_px);
+        fit.end_px = map(fit.end_px);
+    }
+    draw_overlay(&small, &scaled)
+}
+
+fn shrink(image: &RgbImage) -> RgbImage {
+    if image.width() <= THUMB_WIDTH {
+        return image.clone();
+    }
+    let h = (u64::from(image.height()) * u64::from(THUMB_WIDTH) / u64::from(image.width())) as u32;
+    imageops::resize(image, THUMB_WIDTH, h.max(1), FilterType::Triangle)
+}
+
+fn caption(row: &FrameRow, timed: bool) -> String {
+    let when = if timed {
+        format!("{:.2} s", row.t)
+    } else {
+        format!("#{}", row.t as u64)
+    };
+    match (row.detected, row.angle_deg, row.force_nn) {
+        (true, Some(a), Some(f)) => {
+            let (scale, unit) = force_unit(f.abs());
+            format!("{}  {when}  {a:+.2}°  {:+.1} {unit}", row.name, f * scale)
+        }
+        _ => format!("{}  {when}  not detected", row.name),
+    }
+}
+
+/// The thumbnails in a grid of `columns`, captions below each, as one picture.
+pub fn strip(thumbs: &[Thumbnail], columns: usize) -> Option<RgbImage> {
+    let columns = columns.max(1);
+    let cell_w = thumbs.iter().map(|t| t.image.width()).max()? + 10;
+    let cell_h = thumbs.iter().map(|t| t.image.height()).max()? + 30;
+    let rows = thumbs.len().div_ceil(columns) as u32;
+    let cols = thumbs.len().min(columns) as u32;
+    let mut img = RgbImage::from_pixel(cols * cell_w, rows * cell_h, Rgb([255, 255, 255]));
+    for (k, t) in thumbs.iter().enumerate() {
+        let (x, y) = ((k % columns) as u32 * cell_w, (k / columns) as u32 * cell_h);
+        imageops::overlay(&mut img, &t.image, i64::from(x + 5), i64::from(y + 5));
+        let text_y = (y + 8 + t.image.height()) as i32;
+        plot::small_text(&mut img, x as i32 + 5, text_y, &t.caption);
+    }
+    Some(img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_takes_first_last_and_even_steps() {
+        assert_eq!(spread(10, 4), [0, 3, 6, 9]);
+        assert_eq!(spread(3, 8), [0, 1, 2]);
+        assert_eq!(spread(5, 1), [0]);
+        assert!(spread(0, 4).is_empty());
+    }
+}

@@ -1,0 +1,206 @@
+//! Accuracy of a results CSV against a session's `truth.csv`, with the definitions of
+//! `score.py` (the project's scoring tool): rows are matched by file name; a probe frame
+//! counts as detected when the result says so and has an angle; the angle error's
+//! median, 95th percentile (numpy's linear interpolation) and maximum, and the apex
+//! error's median, over the detected probe frames; empty sets give infinity.
+use std::collections::HashMap;
+use std::path::Path;
+
+use super::results::{split_csv_line, ResultRow, ResultsError};
+
+/// One row of a `truth.csv` (scene.md's columns).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthRow {
+    pub frame: String,
+    /// The probe is in view.
+    pub detected: bool,
+    pub angle_deg: f64,
+    pub force_nn: f64,
+    pub tip_px: [f64; 2],
+    pub magnification: f64,
+    pub px_per_um: f64,
+    pub t_s: Option<f64>,
+}
+
+/// Reads a `truth.csv`.
+pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, ResultsError> {
+    let format = |reason: String| ResultsError::Format {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let text = std::fs::read_to_string(path).map_err(|source| ResultsError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+    let header = split_csv_line(lines.next().ok_or_else(|| format("empty".into()))?);
+    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let names = [
+        "frame",
+        "detected",
+        "angle_deg",
+        "force_nN",
+        "tip_x",
+        "tip_y",
+    ];
+    let [Some(frame), Some(det), Some(angle), Some(force), Some(tx), Some(ty)] = names.map(col)
+    else {
+        return Err(format(format!("truth.csv needs the columns {names:?}")));
+    };
+    let (mag, ppu, t) = (col("magnification"), col("px_per_um"), col("t_s"));
+    Ok(lines
+        .map(|line| {
+            let cells = split_csv_line(line);
+            let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
+            let num = |i: Option<usize>| cell(i).parse::<f64>().unwrap_or(f64::NAN);
+            TruthRow {
+                frame: cell(Some(frame)).to_string(),
+                detected: cell(Some(det)) == "1",
+                angle_deg: num(Some(angle)),
+                force_nn: num(Some(force)),
+                tip_px: [num(Some(tx)), num(Some(ty))],
+                magnification: num(mag),
+                px_per_um: num(ppu),
+                t_s: Some(num(t)).filter(|v| v.is_finite()),
+            }
+        })
+        .collect())
+}
+
+/// score.py's numbers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Score {
+    pub frames: usize,
+    /// Truth frames with the probe in view.
+    pub positives: usize,
+    pub detect_rate: f64,
+    pub false_detections: usize,
+    pub angle_err_median_deg: f64,
+    pub angle_err_p95_deg: f64,
+    pub angle_err_max_deg: f64,
+    pub tip_err_median_px: f64,
+}
+
+/// Scores `results` against `truth`; a truth frame missing from the results is a miss.
+pub fn score(truth: &[TruthRow], results: &[ResultRow]) -> Score {
+    let by_name: HashMap<&str, &ResultRow> =
+        results.iter().map(|r| (base_name(&r.frame), r)).collect();
+    let (mut positives, mut detected, mut false_detections) = (0, 0, 0);
+    let (mut angle_err, mut tip_err) = (Vec::new(), Vec::new());
+    for t in truth {
+        let found = by_name
+            .get(base_name(&t.frame))
+            .filter(|r| r.detected && r.angle_deg.is_some());
+        match (t.detected, found) {
+            (true, Some(r)) => {
+                positives += 1;
+                detected += 1;
+                angle_err.push((r.angle_deg.unwrap_or(f64::NAN) - t.angle_deg).abs());
+                tip_err.push(r.tip_px.map_or(f64::INFINITY, |p| {
+                    (p[0] - t.tip_px[0]).hypot(p[1] - t.tip_px[1])
+                }));
+            }
+            (true, None) => positives += 1,
+            (false, found) => false_detections += usize::from(found.is_some()),
+        }
+    }
+    Score {
+        frames: truth.len(),
+        positives,
+        detect_rate: detected as f64 / positives.max(1) as f64,
+        false_detections,
+        angle_err_median_deg: percentile(&angle_err, 50.0),
+        angle_err_p95_deg: percentile(&angle_err, 95.0),
+        angle_err_max_deg: percentile(&angle_err, 100.0),
+        tip_err_median_px: percentile(&tip_err, 50.0),
+    }
+}
+
+/// The file name without folders (score.py compares base names).
+fn base_name(frame: &str) -> &str {
+    frame.rsplit(['/', '\\']).next().unwrap_or(frame)
+}
+
+/// numpy's default (linear) percentile; infinity for no values.
+pub fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::INFINITY;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let pos = q / 100.0 * (v.len() - 1) as f64;
+    let (i, frac) = (pos.floor() as usize, pos - pos.floor());
+    if i + 1 < v.len() {
+        v[i] + frac * (v[i + 1] - v[i])
+    } else {
+        v[i]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn truth(frame: &str, detected: bool, angle_deg: f64, tip: [f64; 2]) -> TruthRow {
+        TruthRow {
+            frame: frame.into(),
+            detected,
+            angle_deg,
+            force_nn: 0.0,
+            tip_px: tip,
+            magnification: 2000.0,
+            px_per_um: 10.0,
+            t_s: None,
+        }
+    }
+
+    fn result(frame: &str, angle: Option<f64>, tip: Option<[f64; 2]>) -> ResultRow {
+        ResultRow {
+            frame: frame.into(),
+            detected: angle.is_some(),
+            angle_deg: angle,
+            tip_px: tip,
+            ..ResultRow::default()
+        }
+    }
+
+    #[test]
+    fn percentiles_match_numpy() {
+        // numpy.percentile([1, 2, 3, 4], [50, 95, 100]) = [2.5, 3.85, 4.0]
+        let v = [4.0, 1.0, 3.0, 2.0];
+        assert_eq!(percentile(&v, 50.0), 2.5);
+        assert!((percentile(&v, 95.0) - 3.85).abs() < 1e-12);
+        assert_eq!(percentile(&v, 100.0), 4.0);
+        assert_eq!(percentile(&[], 50.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn scores_as_score_py_does() {
+        let t = [
+            truth("a.png", true, 1.0, [10.0, 10.0]),
+            truth("b.png", true, -2.0, [20.0, 20.0]),
+            truth("c.png", true, 3.0, [30.0, 30.0]),
+            truth("d.png", false, f64::NAN, [f64::NAN; 2]),
+            truth("e.png", false, f64::NAN, [f64::NAN; 2]),
+            truth("f.png", true, 0.5, [5.0, 5.0]),
+        ];
+        let r = [
+            result("dir/a.png", Some(1.1), Some([13.0, 14.0])),
+            result("b.png", Some(-2.3), Some([20.0, 21.0])),
+            result("c.png", None, None),
+            result("d.png", Some(0.2), Some([1.0, 1.0])),
+            result("e.png", None, None),
+            // f.png missing: a miss
+        ];
+        let s = score(&t, &r);
+        assert_eq!((s.frames, s.positives, s.false_detections), (6, 4, 1));
+        assert_eq!(s.detect_rate, 0.5);
+        assert!((s.angle_err_median_deg - 0.2).abs() < 1e-12);
+        assert!((s.angle_err_p95_deg - (0.1 + 0.95 * 0.2)).abs() < 1e-12);
+        assert!((s.angle_err_max_deg - 0.3).abs() < 1e-12);
+        assert_eq!(s.tip_err_median_px, 3.0);
+        let none = score(&t, &[]);
+        assert_eq!(none.detect_rate, 0.0);
+        assert_eq!(none.angle_err_median_deg, f64::INFINITY);
+    }
+}

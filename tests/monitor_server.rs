@@ -1,0 +1,137 @@
+//! The monitor's HTTP side against a running simulated lab, over raw sockets: the page is
+//! self-contained, the frame is a PNG of the SEM's size, other host names are refused,
+//! live pages are capped (503 past `max_clients`), a page that never reads does not
+//! slow the others, and a closed page frees its place. Afterwards the recording has
+//! overlay thumbnails and `nanoforce report` shows them with the run's loop figures.
+mod monitor_support;
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use monitor_support::*;
+
+/// Opens `/events` and returns the stream after its response head.
+fn open_events(port: u16) -> (TcpStream, String) {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    write!(s, "GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").unwrap();
+    let mut head = Vec::new();
+    let mut byte = [0u8; 1];
+    while !head.ends_with(b"\r\n\r\n") && s.read(&mut byte).unwrap_or(0) == 1 {
+        head.push(byte[0]);
+    }
+    (s, String::from_utf8_lossy(&head).to_string())
+}
+
+/// Counts `update` events read from `s` during `span`.
+fn count_updates(s: &mut TcpStream, span: Duration) -> usize {
+    let deadline = Instant::now() + span;
+    let mut text = Vec::new();
+    let mut buf = [0u8; 65536];
+    while Instant::now() < deadline {
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => text.extend_from_slice(&buf[..n]),
+            Err(_) => break,
+        }
+    }
+    String::from_utf8_lossy(&text)
+        .matches("event: update\n")
+        .count()
+}
+
+#[test]
+fn monitor_serves_caps_pages_and_keeps_thumbnails() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let config = lab_config(
+        dir.path(),
+        &format!("listen = \"127.0.0.1:{port}\"\nmax_clients = 2\nthumbnail_every_s = 1.0"),
+    );
+    let mut daemon = start_daemon(dir.path(), &config, 7.0);
+    wait_for_monitor(&mut daemon, port);
+
+    let (head, page) = http_get(port, "/", &format!("127.0.0.1:{port}"));
+    let page = String::from_utf8_lossy(&page);
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(page.contains("new EventSource(\"/events\")"));
+    assert!(
+        !page.contains("http://") && !page.contains("https://"),
+        "no CDN"
+    );
+
+    let (head, _) = http_get(port, "/", "evil.example:80");
+    assert!(
+        head.starts_with("HTTP/1.1 403"),
+        "DNS rebinding guard: {head}"
+    );
+    let (head, _) = http_get(port, "/nothing", "localhost");
+    assert!(head.starts_with("HTTP/1.1 404"), "{head}");
+
+    // Two pages: one reads, one never does; a third is refused.
+    let (mut reader, head) = open_events(port);
+    assert!(
+        head.starts_with("HTTP/1.1 200") && head.contains("text/event-stream"),
+        "{head}"
+    );
+    let (stalled, _) = open_events(port);
+    let (_, head) = open_events(port);
+    assert!(head.starts_with("HTTP/1.1 503"), "third page: {head}");
+    let updates = count_updates(&mut reader, Duration::from_secs(2));
+    assert!(
+        updates >= 15,
+        "{updates} updates in 2 s beside a stalled page"
+    );
+
+    let (head, png) = http_get(port, "/frame.png", "localhost");
+    assert!(head.contains("image/png"), "{head}");
+    let frame = image::load_from_memory(&png).unwrap();
+    assert_eq!((frame.width(), frame.height()), (640, 480));
+
+    // Closing a page frees its place.
+    drop(reader);
+    drop(stalled);
+    let deadline = Instant::now() + Duration::from_secs(3);
+    loop {
+        let (_, head) = open_events(port);
+        if head.starts_with("HTTP/1.1 200") {
+            break;
+        }
+        assert!(Instant::now() < deadline, "places never freed: {head}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+
+    let status = daemon.wait().unwrap();
+    assert!(status.success());
+    let sessions = dir.path().join("state/sessions");
+    let session = std::fs::read_dir(&sessions)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let thumbs = std::fs::read_dir(session.join("thumbnails"))
+        .unwrap()
+        .count();
+    assert!(
+        (4..=9).contains(&thumbs),
+        "{thumbs} thumbnails in a 7 s run at 1/s"
+    );
+
+    let out = Command::new(BIN)
+        .arg("report")
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(session.join("report/report.html")).unwrap();
+    assert!(html.contains("Recorded by nanoforce run"));
+    assert!(html.contains("<td>Haptic loop</td>") && html.contains("Force error"));
+    assert!(html.matches("data:image/png;base64,").count() >= 3 + 4);
+}
