@@ -87,7 +87,6 @@ pub struct PipeSource {
     config: PipeConfig,
     file: File,
     clock: Clock,
-    header: [u8; HEADER_LEN],
     skip: Vec<u8>,
     arrivals: u64,
 }
@@ -192,7 +191,6 @@ impl PipeSource {
             config: config.clone(),
             file,
             clock,
-            header: [0; HEADER_LEN],
             skip: Vec::new(),
             arrivals: 0,
         })
@@ -210,7 +208,7 @@ impl PipeSource {
 
     /// Reads the next valid header, skipping bytes until the magic when out of step.
     fn next_header(&mut self, deadline: Instant) -> Result<FrameHeader, FrameError> {
-        let mut header = self.header;
+        let mut header = [0u8; HEADER_LEN];
         self.fill(&mut header, deadline)?;
         let mut skipped = 0usize;
         loop {
