@@ -40,3 +40,19 @@ fn debug_scale() {
         }
     }
 }
+
+#[test]
+#[ignore]
+fn profile_loop() {
+    let s = sample("mixed");
+    let cal = s.calibrate();
+    let mut tr = nanoforce::vision::Tracker::new(&s.config.tracker, cal, None);
+    tr.set_coherence(false);
+    let f = s.frame("frame_00001.png");
+    let t0 = std::time::Instant::now();
+    let n = 300;
+    for _ in 0..n {
+        std::hint::black_box(tr.track(&f));
+    }
+    println!("per frame {:?}", t0.elapsed() / n);
+}

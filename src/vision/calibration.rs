@@ -88,7 +88,7 @@ impl Calibration {
             .ok_or_else(|| VisionError::Degenerate("blue and green are parallel".into()))?;
         let bands = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
         let fit = Refiner::default()
-            .fit(reference, &bands, false, BLUR0_PX)
+            .fit(reference, &bands, false, BLUR0_PX, false)
             .ok_or_else(|| {
                 VisionError::Degenerate("the grey-level fit of the edges failed".into())
             })?;

@@ -25,7 +25,18 @@ pub struct EdgePoint {
     pub y: f32,
     /// Image angle of the gradient, pointing towards the brighter side, radians.
     pub angle: f32,
+    /// The gradient's unit vector (cos, sin of `angle`).
+    pub ux: f32,
+    pub uy: f32,
     pub mag: f32,
+}
+
+impl EdgePoint {
+    /// Cosine of the angle between the gradient and a unit normal: cheaper than angles.
+    #[inline]
+    pub fn alignment(&self, normal: [f64; 2]) -> f64 {
+        self.ux as f64 * normal[0] + self.uy as f64 * normal[1]
+    }
 }
 
 /// Edge pixels of one frame, plus a per-pixel map of their gradient directions.
@@ -40,6 +51,8 @@ pub struct EdgeMap {
     pub noise: f32,
     state: Vec<u8>,
     stack: Vec<u32>,
+    /// Pixels that survived suppression (weak or strong), in scan order.
+    marked: Vec<u32>,
 }
 
 const NONE: u8 = 0;
@@ -68,6 +81,8 @@ impl EdgeMap {
         self.direction.clear();
         self.direction.resize(w * h, 0);
         self.points.clear();
+        self.marked.clear();
+        self.stack.clear();
         self.noise = pyr.gradient_noise();
         let high = HIGH_SIGMAS * self.noise;
         let low = LOW_SIGMAS * self.noise;
@@ -80,12 +95,12 @@ impl EdgeMap {
     fn suppress(&mut self, pyr: &Pyramid, low: f32, high: f32, threshold: f32) {
         let (w, h) = (self.width, self.height);
         for y in 3..h.saturating_sub(3) {
-            for x in 3..w.saturating_sub(3) {
-                let i = y * w + x;
-                let m = pyr.mag[i];
+            let row = &pyr.mag[y * w..(y + 1) * w];
+            for (x, &m) in row.iter().enumerate().take(w.saturating_sub(3)).skip(3) {
                 if m < low {
                     continue;
                 }
+                let i = y * w + x;
                 let (dx, dy) = neighbour_step(pyr.gx[i], pyr.gy[i]);
                 let ahead = (i as isize + dy * w as isize + dx) as usize;
                 let behind = (i as isize - dy * w as isize - dx) as usize;
@@ -98,7 +113,13 @@ impl EdgeMap {
                 if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
                     continue;
                 }
-                self.state[i] = if m >= high { STRONG } else { WEAK };
+                self.marked.push(i as u32);
+                if m >= high {
+                    self.state[i] = STRONG;
+                    self.stack.push(i as u32);
+                } else {
+                    self.state[i] = WEAK;
+                }
             }
         }
     }
@@ -106,12 +127,6 @@ impl EdgeMap {
     /// Grows STRONG pixels into connected WEAK ones; whatever stays WEAK is dropped.
     fn hysteresis(&mut self) {
         let w = self.width;
-        self.stack.clear();
-        for (i, &s) in self.state.iter().enumerate() {
-            if s == STRONG {
-                self.stack.push(i as u32);
-            }
-        }
         while let Some(i) = self.stack.pop() {
             let i = i as usize;
             for off in [-(w as isize) - 1, -(w as isize), -(w as isize) + 1, -1, 1] {
@@ -129,8 +144,9 @@ impl EdgeMap {
     /// Lists the STRONG pixels with a sub-pixel position across the edge.
     fn collect(&mut self, pyr: &Pyramid) {
         let w = self.width;
-        for (i, &s) in self.state.iter().enumerate() {
-            if s != STRONG {
+        for k in 0..self.marked.len() {
+            let i = self.marked[k] as usize;
+            if self.state[i] != STRONG {
                 continue;
             }
             let (x, y) = (i % w, i / w);
@@ -150,6 +166,8 @@ impl EdgeMap {
                 x: x as f32 + offset * dx as f32,
                 y: y as f32 + offset * dy as f32,
                 angle,
+                ux: gx / m,
+                uy: gy / m,
                 mag: m,
             });
         }

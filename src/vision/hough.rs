@@ -50,6 +50,8 @@ pub struct Hough {
     acc: Vec<u16>,
     smooth: Vec<u16>,
     pub peaks: Vec<Peak>,
+    /// Per edge, the indices of the points that voted for it (polarity-compatible).
+    pub voters: [Vec<u32>; 3],
 }
 
 impl Hough {
@@ -97,8 +99,11 @@ impl Hough {
     /// `noise` is the gradient noise; weaker pixels get a wider direction tolerance.
     pub fn vote(&mut self, points: &[EdgePoint], noise: f32) {
         self.acc.iter_mut().for_each(|a| *a = 0);
+        self.voters.iter_mut().for_each(Vec::clear);
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
-        for p in points {
+        // Offset so that bins are found by truncation of a positive number.
+        let rho_shift = (0.5 - self.rho_min) as f32;
+        for (index, p) in points.iter().enumerate() {
             let tol = (1.5 * noise / p.mag) as f64 + 1.5f64.to_radians();
             let tol = tol.clamp(2f64.to_radians(), 8f64.to_radians());
             for e in 0..3 {
@@ -106,6 +111,7 @@ impl Hough {
                 if psi.abs() > self.window_rad + tol {
                     continue;
                 }
+                self.voters[e].push(index as u32);
                 let lo = (((psi - tol - self.psi_min) / PSI_STEP_RAD).ceil()).max(0.0) as usize;
                 let hi = (((psi + tol - self.psi_min) / PSI_STEP_RAD).floor() as isize)
                     .min(n_psi as isize - 1);
@@ -113,7 +119,7 @@ impl Hough {
                     let k = k as usize;
                     let row = e * n_psi + k;
                     let rho = p.x * self.cos[row] + p.y * self.sin[row];
-                    let bin = (rho as f64 - self.rho_min).round() as usize;
+                    let bin = (rho + rho_shift) as usize;
                     let cell = &mut self.acc[row * n_rho + bin];
                     *cell = cell.saturating_add(1);
                 }
@@ -207,6 +213,8 @@ mod tests {
                     x: x as f32,
                     y: y as f32,
                     angle: nrm as f32,
+                    ux: nrm.cos() as f32,
+                    uy: nrm.sin() as f32,
                     mag: 50.0,
                 }
             })

@@ -18,9 +18,17 @@ use image::GrayImage;
 
 use super::geometry::{along, dot, norm, rotate, sub, Line};
 
-/// Most samples per edge (longer bands are strided).
+/// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
-const ITERATIONS: usize = 8;
+const MAX_SAMPLES_PER_EDGE_COARSE: usize = 600;
+/// Gauss-Newton iterations at most (final, coarse), of which the first few on every
+/// other pixel.
+const ITERATIONS: usize = 6;
+const ITERATIONS_COARSE: usize = 4;
+const SUBSAMPLED_ITERATIONS: usize = 2;
+/// Converged when a step moves the rotation and every offset less than this.
+const DONE_TURN_RAD: f64 = 2e-6;
+const DONE_OFFSET_PX: f64 = 2e-3;
 /// Normalisation of the along-edge coordinates (keeps the normal equations balanced).
 const ALONG_UNIT_PX: f64 = 100.0;
 const N_PARAMS: usize = 8 + 3 * PHOTO;
@@ -100,6 +108,8 @@ const CHUNK_OUTLIER_RATIO: f64 = 1.7;
 #[derive(Debug)]
 pub struct Refiner {
     samples: Vec<Sample>,
+    /// The samples of each edge (contiguous).
+    ranges: [std::ops::Range<usize>; 3],
     chunk_ok: [bool; 3 * CHUNKS_PER_EDGE],
     chunk_sq: [f64; 3 * CHUNKS_PER_EDGE],
     chunk_n: [u32; 3 * CHUNKS_PER_EDGE],
@@ -109,6 +119,7 @@ impl Default for Refiner {
     fn default() -> Self {
         Refiner {
             samples: Vec::new(),
+            ranges: [0..0, 0..0, 0..0],
             chunk_ok: [true; 3 * CHUNKS_PER_EDGE],
             chunk_sq: [0.0; 3 * CHUNKS_PER_EDGE],
             chunk_n: [0; 3 * CHUNKS_PER_EDGE],
@@ -128,22 +139,33 @@ struct EdgeFrame {
 }
 
 impl Refiner {
-    /// Fits the bands on `frame`. `shared` ties the edges to one rotation.
+    /// Fits the bands on `frame`. `shared` ties the edges to one rotation; `coarse`
+    /// uses fewer pixels and iterations (to place the bands of the final fit).
     pub fn fit(
         &mut self,
         frame: &GrayImage,
         bands: &[Option<Band>; 3],
         shared: bool,
         blur0: f64,
+        coarse: bool,
     ) -> Option<FitResult> {
-        let half_width = 2.5 * blur0 + 2.5;
+        let half_width = half_width(blur0);
+        let (max_samples, iterations_max) = if coarse {
+            (MAX_SAMPLES_PER_EDGE_COARSE, ITERATIONS_COARSE)
+        } else {
+            (MAX_SAMPLES_PER_EDGE, ITERATIONS)
+        };
         self.samples.clear();
         let mut frames: [Option<EdgeFrame>; 3] = [None; 3];
         for (e, band) in bands.iter().enumerate() {
+            self.ranges[e] = 0..0;
             let Some(b) = band else { continue };
-            if self.collect(frame, e, b, half_width) < 12 {
+            let first = self.samples.len();
+            if self.collect(frame, e, b, half_width, max_samples) < 12 {
+                self.samples.truncate(first);
                 continue;
             }
+            self.ranges[e] = first..self.samples.len();
             let mid = [0.5 * (b.start[0] + b.end[0]), 0.5 * (b.start[1] + b.end[1])];
             let corner = b.bend_from.unwrap_or(b.start);
             frames[e] = Some(EdgeFrame {
@@ -163,27 +185,46 @@ impl Refiner {
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
         self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
-        for iter in 0..ITERATIONS {
-            let ne = self.normal_equations(&frames, &x, &noise, shared);
+        let mut iterations = 0;
+        for iter in 0..iterations_max {
+            iterations += 1;
+            // The first iterations, far from the solution, on every other pixel.
+            let step = if iter < SUBSAMPLED_ITERATIONS { 2 } else { 1 };
+            let ne = self.normal_equations(&frames, &x, &noise, shared, step);
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
-            if (1..=3).contains(&iter) {
+            if (1..=2).contains(&iter) {
                 self.reject_chunks();
             }
-            let done =
-                step[P_TURN].abs() < 1e-7 && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < 1e-4);
+            let done = (P_TURN..P_TURN + 3).all(|k| step[k].abs() < DONE_TURN_RAD)
+                && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_OFFSET_PX);
             last = Some(ne);
-            if done && iter >= 2 {
+            if done && iter > SUBSAMPLED_ITERATIONS {
                 break;
             }
         }
         let ne = last?;
+        if std::env::var("NF_DEBUG").is_ok() {
+            eprintln!(
+                "fit: {} samples {:?}, {} iterations",
+                self.samples.len(),
+                self.ranges,
+                iterations
+            );
+        }
         Some(self.result(&frames, &x, &ne, shared))
     }
 
     /// Adds edge `e`'s band pixels; returns how many.
-    fn collect(&mut self, frame: &GrayImage, e: usize, b: &Band, half_width: f64) -> usize {
+    fn collect(
+        &mut self,
+        frame: &GrayImage,
+        e: usize,
+        b: &Band,
+        half_width: f64,
+        max_samples: usize,
+    ) -> usize {
         let (w, h) = (frame.width() as f64, frame.height() as f64);
         let n = b.line.normal;
         let horizontal = n[1].abs() >= n[0].abs();
@@ -197,9 +238,7 @@ impl Refiner {
         let across = half_width / n[j].abs();
         let per_line = (2.0 * across + 1.0).max(1.0);
         let lines = hi - lo + 1.0;
-        let stride = ((lines * per_line) / MAX_SAMPLES_PER_EDGE as f64)
-            .ceil()
-            .max(1.0) as usize;
+        let stride = ((lines * per_line) / max_samples as f64).ceil().max(1.0) as usize;
         let chunk_lines = (lines / CHUNKS_PER_EDGE as f64).ceil().max(CHUNK_MIN_LINES);
         let limit = [w, h][j] - 2.0;
         let before = self.samples.len();
@@ -283,6 +322,7 @@ impl Refiner {
         x: &[f64; N_PARAMS],
         noise: &[f64; 3],
         shared: bool,
+        step: usize,
     ) -> Normal {
         let mut ne = Normal::default();
         self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
@@ -294,51 +334,52 @@ impl Refiner {
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
             frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
         });
-        for s in &self.samples {
-            let e = s.edge as usize;
-            let Some(f) = &frames[e] else { continue };
-            let p = [s.x as f64, s.y as f64];
-            let n = normals[e];
-            let rel = sub(p, f.origin);
-            let u = dot(along(n), rel);
-            let w = if f.curved {
-                bend_coordinate(f, n, p)
-            } else {
-                0.0
-            };
-            let d = dot(n, rel) - x[P_OFFSET + e] - x[P_BEND] * w * w * w;
-            let z = d / blur;
-            let (cdf, pdf) = (normal_cdf(z), normal_pdf(z));
-            let ph = &x[P_PHOTO + PHOTO * e..P_PHOTO + PHOTO * (e + 1)];
-            let un = u / ALONG_UNIT_PX;
-            let contrast = ph[2] + ph[3] * un;
-            let r = s.value as f64 - (ph[0] + ph[1] * un + contrast * cdf);
-            let c = s.chunk as usize;
-            self.chunk_sq[c] += r * r;
-            self.chunk_n[c] += 1;
-            if !self.chunk_ok[c] {
-                continue;
-            }
-            let k = 1.5 * noise[e];
-            let weight = if r.abs() <= k { 1.0 } else { k / r.abs() };
-            sq[e] += weight * r * r;
-            wsum[e] += weight;
-            // d(model)/d(d) and d(model)/d(blur).
-            let dd = contrast * pdf / blur;
-            let db = -contrast * pdf * z / blur;
+        for (e, f) in frames.iter().enumerate() {
+            let Some(f) = f else { continue };
             let turn_index = if shared { P_TURN } else { P_TURN + e };
             let p0 = P_PHOTO + PHOTO * e;
-            let jac = [
-                (turn_index, -dd * u),
-                (P_OFFSET + e, -dd),
-                (P_BEND, -dd * w * w * w),
-                (P_BLUR, db),
-                (p0, 1.0),
-                (p0 + 1, un),
-                (p0 + 2, cdf),
-                (p0 + 3, cdf * un),
+            let slots = [
+                turn_index,
+                P_OFFSET + e,
+                P_BEND,
+                P_BLUR,
+                p0,
+                p0 + 1,
+                p0 + 2,
+                p0 + 3,
             ];
-            ne.add(&jac, r, weight);
+            let params = EdgeParams {
+                normal: normals[e],
+                along: along(normals[e]),
+                offset: x[P_OFFSET + e],
+                bend: x[P_BEND],
+                blur,
+                photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
+                huber: 1.5 * noise[e],
+            };
+            let range = self.ranges[e].clone();
+            let acc = accumulate_edge(
+                &self.samples[range],
+                step,
+                f,
+                &params,
+                &self.chunk_ok,
+                &mut self.chunk_sq,
+                &mut self.chunk_n,
+            );
+            sq[e] = acc.sq;
+            wsum[e] = acc.wsum;
+            let mut k = 0;
+            for i in 0..8 {
+                ne.g[slots[i]] += acc.g[i];
+                for j in i..8 {
+                    ne.h[slots[i]][slots[j]] += acc.h[k];
+                    if i != j {
+                        ne.h[slots[j]][slots[i]] += acc.h[k];
+                    }
+                    k += 1;
+                }
+            }
         }
         for e in 0..3 {
             ne.noise[e] = if wsum[e] > 0.0 {
@@ -411,11 +452,187 @@ impl Refiner {
     }
 }
 
-/// Distance (along-units) from the corner into the band, zero before the corner.
-fn bend_coordinate(f: &EdgeFrame, n: [f64; 2], p: [f64; 2]) -> f64 {
-    let d = along(n);
-    let towards_far = dot(d, sub(f.origin, f.corner)).signum();
-    (towards_far * dot(d, sub(p, f.corner))).max(0.0) / f.reach
+/// The current parameters of one edge, as the inner loop needs them.
+struct EdgeParams {
+    normal: [f64; 2],
+    along: [f64; 2],
+    offset: f64,
+    bend: f64,
+    blur: f64,
+    /// level, level slope, contrast, contrast slope
+    photo: [f64; 4],
+    /// Huber threshold on the residual, grey levels.
+    huber: f64,
+}
+
+/// One edge's contribution to the normal equations, in the local parameter order
+/// (turn, offset, bend, blur, level, level slope, contrast, contrast slope); `h` is
+/// the upper triangle row by row.
+struct EdgeSums {
+    h: [f64; 36],
+    g: [f64; 8],
+    sq: f64,
+    wsum: f64,
+}
+
+/// The inner loop of the fit: residual, robust weight and Jacobian of every sample of
+/// one edge, accumulated. Stretch statistics are gathered for every sample; samples of
+/// rejected stretches contribute nothing else.
+fn accumulate_edge(
+    samples: &[Sample],
+    step: usize,
+    f: &EdgeFrame,
+    p: &EdgeParams,
+    chunk_ok: &[bool],
+    chunk_sq: &mut [f64],
+    chunk_n: &mut [u32],
+) -> EdgeSums {
+    let mut out = EdgeSums {
+        h: [0.0; 36],
+        g: [0.0; 8],
+        sq: 0.0,
+        wsum: 0.0,
+    };
+    let inv_blur = 1.0 / p.blur;
+    let towards_far = dot(p.along, sub(f.origin, f.corner)).signum();
+    let corner_t = dot(p.along, sub(f.corner, f.origin));
+    for s in samples.iter().step_by(step) {
+        let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
+        let u = p.along[0] * rel[0] + p.along[1] * rel[1];
+        let w = if f.curved {
+            (towards_far * (u - corner_t)).max(0.0) / f.reach
+        } else {
+            0.0
+        };
+        let w3 = w * w * w;
+        let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3;
+        let z = d * inv_blur;
+        let (cdf, pdf) = cdf_pdf(z);
+        let un = u * (1.0 / ALONG_UNIT_PX);
+        let contrast = p.photo[2] + p.photo[3] * un;
+        let r = s.value as f64 - (p.photo[0] + p.photo[1] * un + contrast * cdf);
+        let c = s.chunk as usize;
+        chunk_sq[c] += r * r;
+        chunk_n[c] += 1;
+        if !chunk_ok[c] {
+            continue;
+        }
+        let weight = if r.abs() <= p.huber {
+            1.0
+        } else {
+            p.huber / r.abs()
+        };
+        out.sq += weight * r * r;
+        out.wsum += weight;
+        let dd = contrast * pdf * inv_blur;
+        let j = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
+        // Unrolled upper triangle of w j j^T (the compiler keeps it in registers).
+        let w0 = weight * j[0];
+        out.g[0] += w0 * r;
+        out.h[0] += w0 * j[0];
+        out.h[1] += w0 * j[1];
+        out.h[2] += w0 * j[2];
+        out.h[3] += w0 * j[3];
+        out.h[4] += w0 * j[4];
+        out.h[5] += w0 * j[5];
+        out.h[6] += w0 * j[6];
+        out.h[7] += w0 * j[7];
+        let w1 = weight * j[1];
+        out.g[1] += w1 * r;
+        out.h[8] += w1 * j[1];
+        out.h[9] += w1 * j[2];
+        out.h[10] += w1 * j[3];
+        out.h[11] += w1 * j[4];
+        out.h[12] += w1 * j[5];
+        out.h[13] += w1 * j[6];
+        out.h[14] += w1 * j[7];
+        let w2 = weight * j[2];
+        out.g[2] += w2 * r;
+        out.h[15] += w2 * j[2];
+        out.h[16] += w2 * j[3];
+        out.h[17] += w2 * j[4];
+        out.h[18] += w2 * j[5];
+        out.h[19] += w2 * j[6];
+        out.h[20] += w2 * j[7];
+        let w3 = weight * j[3];
+        out.g[3] += w3 * r;
+        out.h[21] += w3 * j[3];
+        out.h[22] += w3 * j[4];
+        out.h[23] += w3 * j[5];
+        out.h[24] += w3 * j[6];
+        out.h[25] += w3 * j[7];
+        let w4 = weight * j[4];
+        out.g[4] += w4 * r;
+        out.h[26] += w4 * j[4];
+        out.h[27] += w4 * j[5];
+        out.h[28] += w4 * j[6];
+        out.h[29] += w4 * j[7];
+        let w5 = weight * j[5];
+        out.g[5] += w5 * r;
+        out.h[30] += w5 * j[5];
+        out.h[31] += w5 * j[6];
+        out.h[32] += w5 * j[7];
+        let w6 = weight * j[6];
+        out.g[6] += w6 * r;
+        out.h[33] += w6 * j[6];
+        out.h[34] += w6 * j[7];
+        let w7 = weight * j[7];
+        out.g[7] += w7 * r;
+        out.h[35] += w7 * j[7];
+    }
+    out
+}
+
+/// Half-width of the band of pixels fitted around an edge, for a blur (pixels).
+pub fn half_width(blur: f64) -> f64 {
+    2.0 * blur + 2.5
+}
+
+/// The normal CDF and density tabulated on [-CDF_RANGE, CDF_RANGE] every 1/CDF_STEPS:
+/// the inner loop's exponentials were half the cost of a frame.
+const CDF_RANGE: f64 = 8.0;
+const CDF_STEPS: f64 = 16.0;
+const CDF_NODES: usize = (2.0 * CDF_RANGE * CDF_STEPS) as usize + 2;
+static CDF_TABLE: std::sync::OnceLock<[[f64; 2]; CDF_NODES]> = std::sync::OnceLock::new();
+
+fn cdf_table() -> &'static [[f64; 2]; CDF_NODES] {
+    CDF_TABLE.get_or_init(|| {
+        let mut t = [[0.0; 2]; CDF_NODES];
+        for (k, node) in t.iter_mut().enumerate() {
+            let z = -CDF_RANGE + k as f64 / CDF_STEPS;
+            *node = [normal_cdf(z), normal_pdf(z)];
+        }
+        t
+    })
+}
+
+/// Standard normal CDF (cubic Hermite between the tabulated values and slopes, error
+/// below 1e-7) and density (linear, error below 2e-4), outside the table 0/1 and 0.
+#[inline]
+fn cdf_pdf(z: f64) -> (f64, f64) {
+    let pos = (z + CDF_RANGE) * CDF_STEPS;
+    if pos <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let k = pos as usize;
+    if k + 1 >= CDF_NODES {
+        return (1.0, 0.0);
+    }
+    let table = cdf_table();
+    let (a, b) = (table[k], table[k + 1]);
+    let t = pos - k as f64;
+    let h = 1.0 / CDF_STEPS;
+    let (t2, t3) = (t * t, t * t * t);
+    let cdf = (2.0 * t3 - 3.0 * t2 + 1.0) * a[0]
+        + (t3 - 2.0 * t2 + t) * h * a[1]
+        + (-2.0 * t3 + 3.0 * t2) * b[0]
+        + (t3 - t2) * h * b[1];
+    (cdf, a[1] + t * (b[1] - a[1]))
+}
+
+/// Standard normal density.
+fn normal_pdf(z: f64) -> f64 {
+    0.398_942_280_401_432_7 * (-0.5 * z * z).exp()
 }
 
 /// Accumulated normal equations `h * step = g` of one iteration.
@@ -434,17 +651,6 @@ impl Default for Normal {
             g: [0.0; N_PARAMS],
             fixed: [false; N_PARAMS],
             noise: [f64::INFINITY; 3],
-        }
-    }
-}
-
-impl Normal {
-    fn add(&mut self, jac: &[(usize, f64); 8], r: f64, w: f64) {
-        for &(i, ji) in jac {
-            self.g[i] += w * ji * r;
-            for &(k, jk) in jac {
-                self.h[i][k] += w * ji * jk;
-            }
         }
     }
 }
@@ -535,11 +741,6 @@ fn apply(x: &mut [f64; N_PARAMS], step: &[f64; N_PARAMS]) {
     x[P_BLUR] = x[P_BLUR].clamp(0.3, 4.0);
 }
 
-/// Standard normal density.
-pub fn normal_pdf(z: f64) -> f64 {
-    0.398_942_280_401_432_7 * (-0.5 * z * z).exp()
-}
-
 /// Standard normal CDF via erf (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
 pub fn normal_cdf(z: f64) -> f64 {
     let x = z * std::f64::consts::FRAC_1_SQRT_2;
@@ -567,6 +768,16 @@ mod tests {
     }
 
     #[test]
+    fn tabulated_cdf_matches_the_direct_one() {
+        for i in -1000..=1000 {
+            let z = i as f64 * 0.0093;
+            let (c, p) = cdf_pdf(z);
+            assert!((c - normal_cdf(z)).abs() < 3e-7, "{z}");
+            assert!((p - normal_pdf(z)).abs() < 2e-4, "{z}");
+        }
+    }
+
+    #[test]
     fn cdf_matches_known_values() {
         assert!((normal_cdf(0.0) - 0.5).abs() < 1e-7);
         assert!((normal_cdf(1.0) - 0.841_344_746).abs() < 2e-7);
@@ -591,7 +802,9 @@ mod tests {
             bend_from: None,
         };
         let mut r = Refiner::default();
-        let fit = r.fit(&img, &[None, Some(band), None], false, 1.0).unwrap();
+        let fit = r
+            .fit(&img, &[None, Some(band), None], false, 1.0, false)
+            .unwrap();
         let e = fit.edges[1].unwrap();
         let got = e.line.normal[1].atan2(e.line.normal[0]);
         assert!(
@@ -650,7 +863,9 @@ mod debug_refine {
             bend_from: None,
         };
         let mut r = Refiner::default();
-        let fit = r.fit(&img, &[None, Some(band), None], false, 1.2).unwrap();
+        let fit = r
+            .fit(&img, &[None, Some(band), None], false, 1.2, false)
+            .unwrap();
         let e = fit.edges[1].unwrap();
         let dd = along(e.line.normal);
         let mut a = -(dd[1].atan2(dd[0])).to_degrees();

@@ -16,7 +16,7 @@ use super::geometry::{add, clip_to_rect, dot, norm, scale, screen_deg_from_image
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
-use super::refine::{Band, FitResult, Refiner};
+use super::refine::{half_width, Band, FitResult, Refiner};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::{EdgeFit, Estimate, Miss};
 use crate::config::{Threshold, TrackerConfig};
@@ -109,6 +109,7 @@ impl Tracker {
         self.cands.build(
             &self.hough.peaks,
             &self.edges.points,
+            &self.hough.voters,
             template.normal_angles(),
             [w, h],
         );
@@ -165,11 +166,11 @@ impl Tracker {
         };
         let size = [frame.width() as f64, frame.height() as f64];
         let first = bands(t, &pose, size, self.blur);
-        let fit = self.refiner.fit(frame, &first, true, self.blur)?;
+        let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
         // Second pass on bands placed from the refined lines.
         let pose = refined_pose(t, &pose, &fit);
         let bands = bands(t, &pose, size, self.blur);
-        let fit = self.refiner.fit(frame, &bands, true, fit.blur)?;
+        let fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         let pose = refined_pose(t, &pose, &fit);
         Some(self.verdict(t, &hyp, &pose, &fit, &bands, size))
     }
@@ -237,11 +238,6 @@ impl Tracker {
             miss: None,
         }
     }
-}
-
-/// Half-width of the fitted band for a blur, pixels (matches `refine`).
-fn half_width(blur: f64) -> f64 {
-    2.5 * blur + 2.5
 }
 
 /// The part of edge `e`'s predicted segment inside the frame: (corner side, far side).
@@ -382,7 +378,7 @@ mod debug_tests {
                 };
                 let size = [frame.width() as f64, frame.height() as f64];
                 let b = bands(&t, &pose, size, tr.blur);
-                let fit = tr.refiner.fit(&frame, &b, false, tr.blur).unwrap();
+                let fit = tr.refiner.fit(&frame, &b, false, tr.blur, false).unwrap();
                 print!(
                     "{name} {f} {angle:+8.3} {:5} {:8} joint {:+.3}",
                     v[6],
@@ -473,5 +469,91 @@ mod debug_frame {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod debug_timing {
+    use super::*;
+    use crate::config::Config;
+    use std::path::Path;
+
+    /// CPU time of this thread, seconds (immune to other processes on the machine).
+    fn cpu_s() -> f64 {
+        let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap();
+        let after = &stat[stat.rfind(')').unwrap() + 2..];
+        let f: Vec<&str> = after.split(' ').collect();
+        (f[11].parse::<f64>().unwrap() + f[12].parse::<f64>().unwrap()) / 100.0
+    }
+
+    #[test]
+    #[ignore]
+    fn stage_times() {
+        let name = std::env::var("SAMPLE").unwrap_or("mixed".into());
+        let file = std::env::var("FRAMES").unwrap_or("frame_00001.png".into());
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/samples")
+            .join(name);
+        let cfg = Config::load(&dir.join("probe.toml")).unwrap();
+        let cal_cfg = cfg.tracker.calibration.clone().unwrap();
+        let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
+        let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
+        let mut tr = Tracker::new(&cfg.tracker, cal, None);
+        tr.set_coherence(false);
+        let frame = image::open(dir.join("frames").join(file))
+            .unwrap()
+            .to_luma8();
+        let t = *tr.calibration.template();
+        tr.track(&frame);
+        let n = 400;
+        let mut out = String::new();
+        let mut total = 0.0;
+        let mut stage = |label: &str, f: &mut dyn FnMut()| {
+            let t0 = cpu_s();
+            for _ in 0..n {
+                f();
+            }
+            let us = (cpu_s() - t0) * 1e6 / n as f64;
+            total += us;
+            out += &format!("{label} {us:.0}  ");
+        };
+        stage("build", &mut || tr.pyr.build(&frame));
+        let thr = tr.pyr.threshold(tr.threshold);
+        stage("threshold", &mut || {
+            std::hint::black_box(tr.pyr.threshold(tr.threshold));
+        });
+        stage("edges", &mut || tr.edges.detect(&tr.pyr, thr));
+        stage("vote", &mut || {
+            tr.hough.configure(
+                tr.pyr.width,
+                tr.pyr.height,
+                tr.window_rad,
+                t.normal_angles(),
+            );
+            tr.hough.vote(&tr.edges.points, tr.edges.noise)
+        });
+        stage("peaks", &mut || tr.hough.find_peaks());
+        let size = [tr.pyr.width, tr.pyr.height];
+        stage("cands", &mut || {
+            tr.cands.build(
+                &tr.hough.peaks,
+                &tr.edges.points,
+                &tr.hough.voters,
+                t.normal_angles(),
+                size,
+            )
+        });
+        stage("search", &mut || {
+            std::hint::black_box(tr.search.run(&t, &tr.cands, &tr.edges, None));
+        });
+        stage("attempt", &mut || {
+            std::hint::black_box(tr.attempt(&frame, &t, None));
+        });
+        println!("{out} total {total:.0} us (cpu)");
+        println!(
+            "points {} cands {}",
+            tr.edges.points.len(),
+            tr.cands.list.len()
+        );
     }
 }
