@@ -12,7 +12,11 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::control::{RawSafety, RawTeleop, TeleopGains};
+use crate::daemon::config::{DaemonConfig, RawDaemon};
+use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
+use crate::sim::config::{RawSim, SimConfig};
 
 /// Default half-width of the Hough search window around each calibrated edge, degrees.
 pub const DEFAULT_WINDOW_DEG: f64 = 20.0;
@@ -45,6 +49,13 @@ pub struct Config {
     pub path: PathBuf,
     pub cantilever: Cantilever,
     pub tracker: TrackerConfig,
+    /// `[teleop]` and `[safety]`: the gains SIGHUP may reload.
+    pub teleop: TeleopGains,
+    /// `[frames]`, `[daq]`, `[haptic]`: which backend drives each device.
+    pub devices: DevicesConfig,
+    pub daemon: DaemonConfig,
+    /// `[sim]`: the simulated lab, used by every `"sim"` backend.
+    pub sim: SimConfig,
 }
 
 /// How the frame is binarised before edge detection.
@@ -100,6 +111,13 @@ pub struct CalibrationConfig {
 struct RawConfig {
     cantilever: Option<RawCantilever>,
     tracker: Option<RawTracker>,
+    teleop: Option<RawTeleop>,
+    safety: Option<RawSafety>,
+    frames: Option<RawDevice>,
+    daq: Option<RawDevice>,
+    haptic: Option<RawDevice>,
+    daemon: Option<RawDaemon>,
+    sim: Option<RawSim>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -158,21 +176,38 @@ impl Config {
             Some(raw) => check.tracker(raw)?,
             None => TrackerConfig::default(),
         };
+        let teleop = TeleopGains::validate(
+            raw.teleop.unwrap_or_default(),
+            raw.safety.unwrap_or_default(),
+            &check,
+        )?;
+        let devices = DevicesConfig::validate(
+            raw.frames.unwrap_or_default(),
+            raw.daq.unwrap_or_default(),
+            raw.haptic.unwrap_or_default(),
+            &check,
+        )?;
+        let daemon = DaemonConfig::validate(raw.daemon.unwrap_or_default(), &check)?;
+        let sim = SimConfig::validate(raw.sim.unwrap_or_default(), &check)?;
         Ok(Config {
             path: path.to_path_buf(),
             cantilever,
             tracker,
+            teleop,
+            devices,
+            daemon,
+            sim,
         })
     }
 }
 
 /// Validation helpers that know which file they are checking.
-struct Checker<'a> {
+pub(crate) struct Checker<'a> {
     file: &'a Path,
 }
 
 impl Checker<'_> {
-    fn invalid(&self, key: &str, value: impl fmt::Display, reason: &str) -> ConfigError {
+    pub(crate) fn invalid(&self, key: &str, value: impl fmt::Display, reason: &str) -> ConfigError {
         ConfigError::Invalid {
             file: self.file.to_path_buf(),
             key: key.to_string(),
@@ -181,7 +216,7 @@ impl Checker<'_> {
         }
     }
 
-    fn inconsistent(&self, message: String) -> ConfigError {
+    pub(crate) fn inconsistent(&self, message: String) -> ConfigError {
         ConfigError::Inconsistent {
             file: self.file.to_path_buf(),
             message,
@@ -189,11 +224,71 @@ impl Checker<'_> {
     }
 
     /// A finite, strictly positive number.
-    fn positive(&self, key: &str, value: f64) -> Result<f64, ConfigError> {
+    pub(crate) fn positive(&self, key: &str, value: f64) -> Result<f64, ConfigError> {
         if value.is_finite() && value > 0.0 {
             Ok(value)
         } else {
             Err(self.invalid(key, value, "must be a finite number > 0"))
+        }
+    }
+
+    /// Three finite components, each > 0 (or >= 0 when `zero_ok`).
+    pub(crate) fn vector3(
+        &self,
+        key: &str,
+        v: [f64; 3],
+        zero_ok: bool,
+    ) -> Result<nalgebra::Vector3<f64>, ConfigError> {
+        let ok = |x: f64| x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0));
+        if v.iter().all(|&x| ok(x)) {
+            Ok(nalgebra::Vector3::from(v))
+        } else {
+            let reason = if zero_ok {
+                "must hold three finite numbers >= 0"
+            } else {
+                "must hold three finite numbers > 0"
+            };
+            Err(self.invalid(key, format_args!("{v:?}"), reason))
+        }
+    }
+
+    /// A direction: finite, normalised here (it must not be zero).
+    pub(crate) fn unit_vector(
+        &self,
+        key: &str,
+        v: [f64; 3],
+    ) -> Result<nalgebra::Vector3<f64>, ConfigError> {
+        let vector = nalgebra::Vector3::from(v);
+        let norm = vector.norm();
+        if norm.is_finite() && norm > 1e-9 {
+            Ok(vector / norm)
+        } else {
+            Err(self.invalid(
+                key,
+                format_args!("{v:?}"),
+                "must be a finite, non-zero direction",
+            ))
+        }
+    }
+
+    /// A 3x3 matrix given as rows that is orthonormal (rotation or signed permutation).
+    pub(crate) fn orthonormal(
+        &self,
+        key: &str,
+        rows: [[f64; 3]; 3],
+    ) -> Result<nalgebra::Matrix3<f64>, ConfigError> {
+        let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
+        let error = (m * m.transpose() - nalgebra::Matrix3::identity())
+            .abs()
+            .max();
+        if error.is_finite() && error < 1e-6 {
+            Ok(m)
+        } else {
+            Err(self.invalid(
+                key,
+                format_args!("{rows:?}"),
+                "must be orthonormal (a rotation or a signed permutation of the axes)",
+            ))
         }
     }
 

@@ -6,10 +6,20 @@
 //!
 //! Modules are cut by domain:
 //! - [`model`]: the cantilever physics (exact elastica, lookup table, stiffness).
-//! - [`config`]: TOML files -> validated [`config::Config`].
+//! - [`scene`]: synthetic SEM frames with ground truth (tests, benches, simulator).
 //! - [`vision`]: the tip tracker and its calibration.
+//! - [`control`]: the teleoperation law and its safety rules.
+//! - [`hw`]: devices behind small traits, each with a simulated backend.
+//! - [`sim`]: the simulated lab (stage, contact, SEM, operator).
+//! - [`daemon`]: the real-time teleoperation daemon.
+//! - [`config`]: TOML files -> validated [`config::Config`].
 //! - [`cli`]: the command-line front end over the library.
 pub mod cli;
 pub mod config;
+pub mod control;
+pub mod daemon;
+pub mod hw;
 pub mod model;
+pub mod scene;
+pub mod sim;
 pub mod vision;

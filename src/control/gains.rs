@@ -1,0 +1,300 @@
+//! `[teleop]` and `[safety]`: the teleoperation gains and safety limits, mirrored from
+//! TOML and validated. These are the only settings SIGHUP may change while running.
+//!
+//! Frames: `haptic` is the PHANToM's frame (millimetres, newtons), `stage` the S100's
+//! (micrometres per second). `stage_from_haptic` maps a haptic direction to a stage
+//! direction and must be orthonormal (a rotation or signed permutation), so forces
+//! travel back with its transpose.
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+
+use crate::config::{Checker, ConfigError};
+
+/// Raw `[teleop]` section; every field optional, defaults in [`TeleopGains::default`].
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTeleop {
+    rate_hz: Option<f64>,
+    deadband_mm: Option<[f64; 3]>,
+    gain_um_per_s_per_mm: Option<[f64; 3]>,
+    speed_limit_um_per_s: Option<[f64; 3]>,
+    stage_from_haptic: Option<[[f64; 3]; 3]>,
+    spring_n_per_mm: Option<[f64; 3]>,
+    damping_n_s_per_mm: Option<[f64; 3]>,
+    force_scale_n_per_nn: Option<f64>,
+    press_direction_stage: Option<[f64; 3]>,
+    pressing_force_sign: Option<f64>,
+    max_force_n: Option<f64>,
+    force_rate_n_per_s: Option<f64>,
+}
+
+/// Raw `[safety]` section.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSafety {
+    stale_after_ms: Option<f64>,
+    fade_ms: Option<f64>,
+    max_contact_force_nn: Option<f64>,
+    recentre_radius_mm: Option<f64>,
+}
+
+/// Validated teleoperation law parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeleopGains {
+    /// Haptic loop rate.
+    pub rate_hz: f64,
+    /// Per haptic axis: stylus travel from centre that commands no motion.
+    pub deadband_mm: Vector3<f64>,
+    /// Per haptic axis: stage speed per millimetre beyond the deadband.
+    pub gain_um_per_s_per_mm: Vector3<f64>,
+    /// Per stage axis: the commanded speed is scaled down (direction kept) to fit.
+    pub speed_limit_um_per_s: Vector3<f64>,
+    pub stage_from_haptic: Matrix3<f64>,
+    /// Centring virtual springs and damping, per haptic axis.
+    pub spring_n_per_mm: Vector3<f64>,
+    pub damping_n_s_per_mm: Vector3<f64>,
+    /// Newtons on the stylus per nanonewton sensed at the tip.
+    pub force_scale_n_per_nn: f64,
+    /// Unit vector, stage frame: moving the stage this way presses the tip on the sample.
+    pub press_direction_stage: Vector3<f64>,
+    /// +1 or -1: the sign of the tracked force while the tip presses on the sample.
+    pub pressing_force_sign: f64,
+    /// The device's force limit: the total force is clamped to this magnitude.
+    pub max_force_n: f64,
+    /// Slew limit of the total force.
+    pub force_rate_n_per_s: f64,
+    pub safety: SafetyLimits,
+}
+
+/// Validated `[safety]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafetyLimits {
+    /// An estimate older than this (from its frame's time) is stale.
+    pub stale_after_ms: f64,
+    /// Stale or lost: the sensed force fades to zero over this time.
+    pub fade_ms: f64,
+    /// Above this sensed force, motion that would press harder is refused.
+    pub max_contact_force_nn: f64,
+    /// The stylus is "back at the centre" (deadman re-engage) within this radius.
+    pub recentre_radius_mm: f64,
+}
+
+impl Default for TeleopGains {
+    fn default() -> Self {
+        TeleopGains {
+            rate_hz: 1000.0,
+            deadband_mm: Vector3::repeat(2.0),
+            gain_um_per_s_per_mm: Vector3::repeat(0.5),
+            speed_limit_um_per_s: Vector3::repeat(20.0),
+            stage_from_haptic: Matrix3::identity(),
+            spring_n_per_mm: Vector3::repeat(0.05),
+            damping_n_s_per_mm: Vector3::repeat(0.0005),
+            force_scale_n_per_nn: 2e-4,
+            press_direction_stage: Vector3::new(0.0, 0.0, -1.0),
+            pressing_force_sign: 1.0,
+            max_force_n: 3.0,
+            force_rate_n_per_s: 60.0,
+            safety: SafetyLimits::default(),
+        }
+    }
+}
+
+impl Default for SafetyLimits {
+    fn default() -> Self {
+        SafetyLimits {
+            stale_after_ms: 100.0,
+            fade_ms: 200.0,
+            max_contact_force_nn: 10_000.0,
+            recentre_radius_mm: 1.5,
+        }
+    }
+}
+
+impl TeleopGains {
+    /// Period of the haptic loop in microseconds.
+    pub fn period_us(&self) -> f64 {
+        1e6 / self.rate_hz
+    }
+
+    /// Stylus force direction for a stage force direction (orthonormal map, so its transpose).
+    pub fn haptic_from_stage(&self) -> Matrix3<f64> {
+        self.stage_from_haptic.transpose()
+    }
+
+    pub(crate) fn validate(
+        teleop: RawTeleop,
+        safety: RawSafety,
+        check: &Checker,
+    ) -> Result<TeleopGains, ConfigError> {
+        let d = TeleopGains::default();
+        let pos = |key: &str, v: Option<f64>, default: f64| match v {
+            Some(v) => check.positive(key, v),
+            None => Ok(default),
+        };
+        let pos3 = |key: &str, v: Option<[f64; 3]>, default: Vector3<f64>, zero_ok: bool| match v {
+            Some(v) => check.vector3(key, v, zero_ok),
+            None => Ok(default),
+        };
+        let rate_hz = pos("teleop.rate_hz", teleop.rate_hz, d.rate_hz)?;
+        if !(100.0..=4000.0).contains(&rate_hz) {
+            return Err(check.invalid("teleop.rate_hz", rate_hz, "must be in [100, 4000] Hz"));
+        }
+        let stage_from_haptic = match teleop.stage_from_haptic {
+            Some(rows) => check.orthonormal("teleop.stage_from_haptic", rows)?,
+            None => d.stage_from_haptic,
+        };
+        let press_direction_stage = match teleop.press_direction_stage {
+            Some(v) => check.unit_vector("teleop.press_direction_stage", v)?,
+            None => d.press_direction_stage,
+        };
+        let pressing_force_sign = match teleop.pressing_force_sign {
+            None => d.pressing_force_sign,
+            Some(s) if s == 1.0 || s == -1.0 => s,
+            Some(s) => {
+                return Err(check.invalid("teleop.pressing_force_sign", s, "must be 1 or -1"))
+            }
+        };
+        let safety = SafetyLimits {
+            stale_after_ms: pos("safety.stale_after_ms", safety.stale_after_ms, 100.0)?,
+            fade_ms: pos("safety.fade_ms", safety.fade_ms, 200.0)?,
+            max_contact_force_nn: pos(
+                "safety.max_contact_force_nn",
+                safety.max_contact_force_nn,
+                d.safety.max_contact_force_nn,
+            )?,
+            recentre_radius_mm: pos(
+                "safety.recentre_radius_mm",
+                safety.recentre_radius_mm,
+                d.safety.recentre_radius_mm,
+            )?,
+        };
+        let gains = TeleopGains {
+            rate_hz,
+            deadband_mm: pos3(
+                "teleop.deadband_mm",
+                teleop.deadband_mm,
+                d.deadband_mm,
+                true,
+            )?,
+            gain_um_per_s_per_mm: pos3(
+                "teleop.gain_um_per_s_per_mm",
+                teleop.gain_um_per_s_per_mm,
+                d.gain_um_per_s_per_mm,
+                true,
+            )?,
+            speed_limit_um_per_s: pos3(
+                "teleop.speed_limit_um_per_s",
+                teleop.speed_limit_um_per_s,
+                d.speed_limit_um_per_s,
+                true,
+            )?,
+            stage_from_haptic,
+            spring_n_per_mm: pos3(
+                "teleop.spring_n_per_mm",
+                teleop.spring_n_per_mm,
+                d.spring_n_per_mm,
+                true,
+            )?,
+            damping_n_s_per_mm: pos3(
+                "teleop.damping_n_s_per_mm",
+                teleop.damping_n_s_per_mm,
+                d.damping_n_s_per_mm,
+                true,
+            )?,
+            force_scale_n_per_nn: pos(
+                "teleop.force_scale_n_per_nn",
+                teleop.force_scale_n_per_nn,
+                d.force_scale_n_per_nn,
+            )?,
+            press_direction_stage,
+            pressing_force_sign,
+            max_force_n: pos("teleop.max_force_n", teleop.max_force_n, d.max_force_n)?,
+            force_rate_n_per_s: pos(
+                "teleop.force_rate_n_per_s",
+                teleop.force_rate_n_per_s,
+                d.force_rate_n_per_s,
+            )?,
+            safety,
+        };
+        let min_deadband = gains.deadband_mm.min();
+        if gains.safety.recentre_radius_mm > min_deadband {
+            return Err(check.inconsistent(format!(
+                "safety.recentre_radius_mm ({}) must not exceed the smallest teleop.deadband_mm ({}): \
+                 re-engaging must never start with a jump in velocity",
+                gains.safety.recentre_radius_mm, min_deadband
+            )));
+        }
+        Ok(gains)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use crate::config::Config;
+
+    const CANTILEVER: &str = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n";
+
+    fn error_of(extra: &str) -> String {
+        Config::from_toml_str(&format!("{CANTILEVER}{extra}"), Path::new("lab.toml"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn defaults_are_valid_and_documented_values() {
+        let cfg = Config::from_toml_str(CANTILEVER, Path::new("lab.toml")).unwrap();
+        assert_eq!(cfg.teleop, super::TeleopGains::default());
+        assert_eq!(cfg.teleop.period_us(), 1000.0);
+    }
+
+    #[test]
+    fn axis_map_must_be_orthonormal() {
+        let msg = error_of("[teleop]\nstage_from_haptic = [[1, 0, 0], [0, 2, 0], [0, 0, 1]]\n");
+        assert!(
+            msg.starts_with("lab.toml: teleop.stage_from_haptic must be orthonormal"),
+            "{msg}"
+        );
+        let cfg = Config::from_toml_str(
+            &format!(
+                "{CANTILEVER}[teleop]\nstage_from_haptic = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]\n"
+            ),
+            Path::new("lab.toml"),
+        )
+        .unwrap();
+        assert_eq!(cfg.teleop.stage_from_haptic[(0, 1)], -1.0);
+    }
+
+    #[test]
+    fn bad_values_name_key_and_value() {
+        let msg = error_of("[teleop]\ndeadband_mm = [1, -1, 1]\n");
+        assert_eq!(
+            msg,
+            "lab.toml: teleop.deadband_mm must hold three finite numbers >= 0, got [1.0, -1.0, 1.0]"
+        );
+        let msg = error_of("[teleop]\npressing_force_sign = 0\n");
+        assert!(
+            msg.contains("teleop.pressing_force_sign must be 1 or -1, got 0"),
+            "{msg}"
+        );
+        let msg = error_of("[teleop]\nrate_hz = 50\n");
+        assert!(msg.contains("teleop.rate_hz"), "{msg}");
+        let msg = error_of("[safety]\nfade_ms = -5\n");
+        assert!(
+            msg.contains("safety.fade_ms") && msg.contains("-5"),
+            "{msg}"
+        );
+        let msg = error_of("[teleop]\npress_direction_stage = [0, 0, 0]\n");
+        assert!(msg.contains("teleop.press_direction_stage"), "{msg}");
+        let msg = error_of("[safety]\nstale_ms = 5\n");
+        assert!(msg.contains("stale_ms"), "{msg}");
+    }
+
+    #[test]
+    fn recentre_radius_must_fit_inside_the_deadband() {
+        let msg = error_of("[teleop]\ndeadband_mm = [1, 1, 1]\n[safety]\nrecentre_radius_mm = 2\n");
+        assert!(msg.contains("safety.recentre_radius_mm (2)"), "{msg}");
+    }
+}

@@ -1,0 +1,320 @@
+//! The 1 kHz haptic loop: a dedicated, named thread on an absolute CLOCK_MONOTONIC
+//! schedule (SCHED_FIFO and locked memory when permitted). Each tick reads the stylus,
+//! runs the teleoperation law on the newest published estimate (never waiting for
+//! vision), writes the stylus force and sends the S100 rate command.
+//!
+//! Nothing here allocates once the loop runs: the estimate arrives through a triple
+//! buffer, new gains and telemetry through wait-free rings, statistics go into
+//! preallocated histograms. Outputs are zeroed and forces switched off when the loop
+//! ends for any reason, panics included ([`Outputs`]'s `Drop`).
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex};
+
+use nalgebra::Vector3;
+
+use super::rt;
+use super::stats::Histogram;
+use super::PublishedEstimate;
+use crate::control::{Controller, SafetyCounters, SafetyState, TeleopGains, TickInput};
+use crate::hw::clock::monotonic_ns;
+use crate::hw::daq::RateOutput;
+use crate::hw::haptic::HapticDevice;
+use crate::hw::Clock;
+
+/// Loop settings that are not teleoperation gains.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoopOptions {
+    /// SCHED_FIFO priority to request (None: leave the scheduler alone).
+    pub rt_priority: Option<i32>,
+    pub lock_memory: bool,
+    /// Busy-wait this long before each deadline for a precise wake-up.
+    pub spin_us: u64,
+    /// Record every n-th tick in the telemetry.
+    pub telemetry_every: u32,
+}
+
+impl Default for LoopOptions {
+    fn default() -> Self {
+        LoopOptions {
+            rt_priority: Some(80),
+            lock_memory: true,
+            spin_us: 60,
+            telemetry_every: 10,
+        }
+    }
+}
+
+/// One telemetry row of the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickRecord {
+    pub t_s: f64,
+    pub period_us: f64,
+    pub position_mm: [f64; 3],
+    pub force_n: [f64; 3],
+    pub velocity_um_s: [f64; 3],
+    pub rendered_force_nn: f64,
+    pub state: SafetyState,
+    pub press_blocked: bool,
+}
+
+/// What the loop shares with the supervisor: counters to read, a flag to stop it.
+#[derive(Debug, Default)]
+pub struct LoopShared {
+    pub stop: AtomicBool,
+    pub ticks: AtomicU64,
+    pub overruns: AtomicU64,
+    pub stale_events: AtomicU64,
+    pub faults: AtomicU64,
+    pub telemetry_dropped: AtomicU64,
+    state: AtomicU8,
+    /// Set on a fault transition (rare: it may allocate), taken by the supervisor to log.
+    pub last_fault: Mutex<Option<String>>,
+}
+
+impl LoopShared {
+    pub fn state(&self) -> SafetyState {
+        match self.state.load(Ordering::Relaxed) {
+            1 => SafetyState::Engaged,
+            2 => SafetyState::HapticFault,
+            3 => SafetyState::DaqFault,
+            _ => SafetyState::WaitingForCentre,
+        }
+    }
+
+    fn set_state(&self, state: SafetyState) {
+        let code = match state {
+            SafetyState::WaitingForCentre => 0,
+            SafetyState::Engaged => 1,
+            SafetyState::HapticFault => 2,
+            SafetyState::DaqFault => 3,
+        };
+        self.state.store(code, Ordering::Relaxed);
+    }
+
+    fn note_fault(&self, message: impl FnOnce() -> String) {
+        if let Ok(mut slot) = self.last_fault.try_lock() {
+            if slot.is_none() {
+                *slot = Some(message());
+            }
+        }
+    }
+}
+
+/// The loop's final numbers.
+#[derive(Debug, Clone)]
+pub struct LoopReport {
+    pub ticks: u64,
+    pub periods_us: Histogram,
+    pub overruns: u64,
+    pub counters: SafetyCounters,
+    pub realtime: bool,
+}
+
+/// The devices the loop drives; dropping it zeroes the stage and switches forces off.
+pub struct Outputs {
+    pub haptic: Box<dyn HapticDevice>,
+    pub stage: Box<dyn RateOutput>,
+    clock: Clock,
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        let now_s = self.clock.now_s();
+        let _ = self.stage.zero(now_s);
+        let _ = self.haptic.write_force(Vector3::zeros());
+        let _ = self.haptic.set_forces_enabled(false);
+    }
+}
+
+/// Everything the loop thread owns.
+pub struct HapticLoop {
+    pub controller: Controller,
+    pub outputs: Outputs,
+    pub estimates: triple_buffer::Output<PublishedEstimate>,
+    pub gains: rtrb::Consumer<TeleopGains>,
+    pub telemetry: rtrb::Producer<TickRecord>,
+    pub shared: Arc<LoopShared>,
+    pub options: LoopOptions,
+}
+
+impl HapticLoop {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        gains: TeleopGains,
+        haptic: Box<dyn HapticDevice>,
+        stage: Box<dyn RateOutput>,
+        clock: Clock,
+        estimates: triple_buffer::Output<PublishedEstimate>,
+        new_gains: rtrb::Consumer<TeleopGains>,
+        telemetry: rtrb::Producer<TickRecord>,
+        shared: Arc<LoopShared>,
+        options: LoopOptions,
+    ) -> Self {
+        HapticLoop {
+            controller: Controller::new(gains),
+            outputs: Outputs {
+                haptic,
+                stage,
+                clock,
+            },
+            estimates,
+            gains: new_gains,
+            telemetry,
+            shared,
+            options,
+        }
+    }
+
+    /// Starts the loop on its own thread named `haptic-loop`.
+    pub fn spawn(self) -> std::io::Result<std::thread::JoinHandle<LoopReport>> {
+        std::thread::Builder::new()
+            .name("haptic-loop".into())
+            .spawn(move || self.run())
+    }
+
+    fn prepare_thread(&self) -> bool {
+        let mut realtime = false;
+        if let Some(priority) = self.options.rt_priority {
+            match rt::set_realtime_priority(priority) {
+                Ok(()) => realtime = true,
+                Err(e) => tracing::warn!(
+                    "haptic loop: SCHED_FIFO priority {priority} refused ({e}); running at \
+                     normal priority, expect more jitter (grant LimitRTPRIO / CAP_SYS_NICE)"
+                ),
+            }
+        }
+        if self.options.lock_memory {
+            if let Err(e) = rt::lock_memory() {
+                tracing::warn!(
+                    "haptic loop: mlockall refused ({e}); pages may fault in (raise LimitMEMLOCK)"
+                );
+            }
+        }
+        realtime
+    }
+
+    /// Runs until `shared.stop` is set; returns the loop's numbers.
+    pub fn run(mut self) -> LoopReport {
+        let realtime = self.prepare_thread();
+        let mut periods_us = Histogram::new(1.0, 20_000.0);
+        let mut period_ns = self.period_ns();
+        let spin_ns = self.options.spin_us * 1000;
+        let mut next_ns = monotonic_ns() + period_ns;
+        let mut last_tick_ns: Option<u64> = None;
+        let mut state = TickState::default();
+        let mut overruns = 0u64;
+        let mut ticks = 0u64;
+        while !self.shared.stop.load(Ordering::Relaxed) {
+            rt::sleep_until(next_ns, spin_ns);
+            let now_ns = monotonic_ns();
+            let period_us = last_tick_ns.map_or(0.0, |last| (now_ns - last) as f64 * 1e-3);
+            if last_tick_ns.is_some() {
+                periods_us.record(period_us);
+            }
+            last_tick_ns = Some(now_ns);
+            next_ns += period_ns;
+            if now_ns > next_ns {
+                // Missed whole deadlines: count them and re-anchor, never burst to catch up.
+                let missed = (now_ns - next_ns) / period_ns + 1;
+                overruns += missed;
+                next_ns += missed * period_ns;
+                self.shared.overruns.store(overruns, Ordering::Relaxed);
+            }
+            while let Ok(gains) = self.gains.pop() {
+                self.controller.set_gains(gains);
+                period_ns = self.period_ns();
+            }
+            self.tick(now_ns, period_us, ticks, &mut state);
+            ticks += 1;
+            self.shared.ticks.store(ticks, Ordering::Relaxed);
+        }
+        LoopReport {
+            ticks,
+            periods_us,
+            overruns,
+            counters: self.controller.counters(),
+            realtime,
+        }
+    }
+
+    fn period_ns(&self) -> u64 {
+        (self.controller.gains().period_us() * 1e3).round() as u64
+    }
+
+    fn tick(&mut self, now_ns: u64, period_us: f64, tick: u64, state: &mut TickState) {
+        let now_s = self.outputs.clock.seconds_at(now_ns);
+        let shared = &self.shared;
+        let haptic = match self.outputs.haptic.read(now_s) {
+            Ok(sample) => Some(sample),
+            Err(e) => {
+                shared.note_fault(|| format!("haptic device: {e}"));
+                None
+            }
+        };
+        let estimate = self.estimates.read().sensed();
+        let out = self.controller.tick(&TickInput {
+            now_s,
+            haptic,
+            estimate: Some(estimate),
+            daq_ok: state.daq_ok,
+        });
+        let haptic_dev = &mut self.outputs.haptic;
+        if out.forces_enabled != state.forces_on {
+            let _ = haptic_dev.set_forces_enabled(out.forces_enabled);
+            state.forces_on = out.forces_enabled;
+        }
+        if out.forces_enabled {
+            if let Err(e) = haptic_dev.write_force(out.force_n) {
+                shared.note_fault(|| format!("haptic device: {e}"));
+            }
+        }
+        let stage = &mut self.outputs.stage;
+        state.daq_ok = match stage.write_velocity(now_s, out.stage_velocity_um_s) {
+            Ok(()) => true,
+            Err(e) => {
+                let _ = stage.zero(now_s);
+                if state.daq_ok {
+                    shared.note_fault(|| format!("stage output: {e}; outputs set to zero"));
+                }
+                false
+            }
+        };
+        shared.set_state(out.state);
+        let counters = self.controller.counters();
+        shared
+            .stale_events
+            .store(counters.stale_events, Ordering::Relaxed);
+        shared.faults.store(counters.faults, Ordering::Relaxed);
+        if tick % u64::from(self.options.telemetry_every.max(1)) == 0 {
+            let record = TickRecord {
+                t_s: now_s,
+                period_us,
+                position_mm: haptic.map_or([f64::NAN; 3], |h| h.position_mm.into()),
+                force_n: out.force_n.into(),
+                velocity_um_s: out.stage_velocity_um_s.into(),
+                rendered_force_nn: out.rendered_force_nn,
+                state: out.state,
+                press_blocked: out.press_block.is_some(),
+            };
+            if self.telemetry.push(record).is_err() {
+                shared.telemetry_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// Device-facing state carried from tick to tick.
+#[derive(Debug, Clone, Copy)]
+struct TickState {
+    daq_ok: bool,
+    forces_on: bool,
+}
+
+impl Default for TickState {
+    fn default() -> Self {
+        TickState {
+            daq_ok: true,
+            forces_on: false,
+        }
+    }
+}

@@ -1,0 +1,181 @@
+//! The vision side of the daemon, two named threads joined by a latest-only slot:
+//!
+//! - `frames`: blocks on the [`FrameSource`] and drops each frame into a triple buffer.
+//!   A frame the tracker has not taken yet is overwritten and counted as dropped, so a
+//!   slow tracker never queues latency.
+//! - `tracker`: takes the newest frame, runs the [`Estimator`] on it and publishes the
+//!   estimate (time of the frame, angle, force, apex, confidence, detected) into the
+//!   triple buffer the haptic loop reads.
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::{self, JoinHandle};
+use std::time::Duration;
+
+use image::GrayImage;
+
+use super::stats::{ForceErrors, Histogram};
+use super::{FrameEstimate, PublishedEstimate};
+use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
+use crate::hw::Clock;
+
+/// Turns a frame into a force estimate (the vision tracker, or a test double).
+pub trait Estimator: Send {
+    fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate;
+}
+
+/// A frame in the slot, with when it became available to the tracker.
+#[derive(Debug, Clone)]
+pub struct TimedFrame {
+    pub image: GrayImage,
+    pub meta: FrameMeta,
+    pub available_s: f64,
+}
+
+impl Default for TimedFrame {
+    fn default() -> Self {
+        TimedFrame {
+            image: GrayImage::new(0, 0),
+            meta: FrameMeta {
+                sequence: 0,
+                captured_s: 0.0,
+                truth: None,
+            },
+            available_s: 0.0,
+        }
+    }
+}
+
+/// Counters the supervisor reads while the threads run.
+#[derive(Debug, Default)]
+pub struct PipelineShared {
+    pub stop: AtomicBool,
+    pub received: AtomicU64,
+    /// Overwritten in the slot before the tracker took them.
+    pub dropped: AtomicU64,
+    /// Gaps in the source's own sequence numbers (dropped before they reached us).
+    pub source_dropped: AtomicU64,
+    pub source_errors: AtomicU64,
+    pub tracked: AtomicU64,
+    pub detected: AtomicU64,
+    /// The source said it has no more frames (a finite recording or a closed pipe).
+    pub source_ended: AtomicBool,
+    pub last_error: Mutex<Option<String>>,
+}
+
+impl PipelineShared {
+    fn note_error(&self, message: String) {
+        if let Ok(mut slot) = self.last_error.lock() {
+            *slot = Some(message);
+        }
+    }
+}
+
+/// One telemetry row per tracked frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimateRecord {
+    pub estimate: PublishedEstimate,
+    pub processing_ms: f64,
+    pub true_force_nn: Option<f64>,
+}
+
+/// What the tracker thread measured.
+#[derive(Debug, Clone)]
+pub struct TrackerReport {
+    pub latency_ms: Histogram,
+    /// Only when frames carry ground truth (the simulated lab).
+    pub force: Option<ForceErrors>,
+}
+
+/// Starts the `frames` thread. It wakes `tracker` whenever a frame lands.
+pub fn spawn_frames(
+    mut source: Box<dyn FrameSource>,
+    mut slot: triple_buffer::Input<TimedFrame>,
+    clock: Clock,
+    shared: Arc<PipelineShared>,
+    tracker: thread::Thread,
+) -> std::io::Result<JoinHandle<()>> {
+    thread::Builder::new().name("frames".into()).spawn(move || {
+        let mut last_sequence: Option<u64> = None;
+        while !shared.stop.load(Ordering::Relaxed) {
+            let frame = slot.input_buffer_mut();
+            match source.next_frame(&mut frame.image) {
+                Ok(meta) => {
+                    frame.meta = meta;
+                    frame.available_s = clock.now_s();
+                    if let Some(gap) = last_sequence.and_then(|s| meta.sequence.checked_sub(s + 1))
+                    {
+                        shared.source_dropped.fetch_add(gap, Ordering::Relaxed);
+                    }
+                    last_sequence = Some(meta.sequence);
+                    shared.received.fetch_add(1, Ordering::Relaxed);
+                    if slot.publish() {
+                        shared.dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                    tracker.unpark();
+                }
+                Err(FrameError::EndOfStream { device }) => {
+                    tracing::info!("{device}: no more frames");
+                    shared.source_ended.store(true, Ordering::Relaxed);
+                    break;
+                }
+                Err(e) => {
+                    shared.source_errors.fetch_add(1, Ordering::Relaxed);
+                    shared.note_error(e.to_string());
+                    // A failing device must not spin the CPU; the source reopens itself.
+                    thread::sleep(Duration::from_millis(100));
+                }
+            }
+        }
+    })
+}
+
+/// The tracker thread's ends of the slots.
+pub struct TrackerSide {
+    pub frames: triple_buffer::Output<TimedFrame>,
+    pub estimates: triple_buffer::Input<PublishedEstimate>,
+    pub telemetry: rtrb::Producer<EstimateRecord>,
+}
+
+/// Runs the tracker loop on the calling thread (spawned by the supervisor as `tracker`).
+pub fn run_tracker(
+    mut estimator: Box<dyn Estimator>,
+    mut side: TrackerSide,
+    clock: Clock,
+    shared: Arc<PipelineShared>,
+) -> TrackerReport {
+    let mut latency_ms = Histogram::new(0.01, 1000.0);
+    let mut force: Option<ForceErrors> = None;
+    let mut seq = 0u64;
+    while !shared.stop.load(Ordering::Relaxed) {
+        if !side.frames.update() {
+            thread::park_timeout(Duration::from_millis(20));
+            continue;
+        }
+        let frame = side.frames.output_buffer_mut();
+        let started_s = clock.now_s();
+        let estimate = estimator.estimate(&frame.image);
+        let published_s = clock.now_s();
+        seq += 1;
+        let published = PublishedEstimate::new(seq, &frame.meta, published_s, &estimate);
+        side.estimates.write(published);
+        latency_ms.record((published_s - frame.available_s) * 1e3);
+        shared.tracked.fetch_add(1, Ordering::Relaxed);
+        if published.detected {
+            shared.detected.fetch_add(1, Ordering::Relaxed);
+        }
+        let truth = frame.meta.truth.filter(|t| t.probe_in_view);
+        if let Some(truth) = truth {
+            let errors = force.get_or_insert_with(ForceErrors::default);
+            errors.record_truth(truth.force_nn);
+            if published.detected {
+                errors.record_error(published.force_nn, truth.force_nn);
+            }
+        }
+        let _ = side.telemetry.push(EstimateRecord {
+            estimate: published,
+            processing_ms: (published_s - started_s) * 1e3,
+            true_force_nn: truth.map(|t| t.force_nn),
+        });
+    }
+    TrackerReport { latency_ms, force }
+}

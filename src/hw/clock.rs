@@ -1,0 +1,60 @@
+//! The daemon's one clock: seconds on CLOCK_MONOTONIC since the daemon started. Frame
+//! timestamps (V4L2 kernel timestamps are CLOCK_MONOTONIC too), estimates and haptic
+//! ticks are all on it, so ages and latencies are differences of plain numbers.
+
+/// Monotonic seconds since an epoch taken at construction. Cheap to copy and share.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Clock {
+    epoch_ns: u64,
+}
+
+impl Clock {
+    /// A clock whose zero is now.
+    pub fn start() -> Self {
+        Clock {
+            epoch_ns: monotonic_ns(),
+        }
+    }
+
+    /// Seconds since the epoch.
+    pub fn now_s(&self) -> f64 {
+        self.seconds_at(monotonic_ns())
+    }
+
+    /// Seconds since the epoch of an absolute CLOCK_MONOTONIC time in nanoseconds.
+    pub fn seconds_at(&self, monotonic_ns: u64) -> f64 {
+        (monotonic_ns as i128 - self.epoch_ns as i128) as f64 * 1e-9
+    }
+
+    /// The absolute CLOCK_MONOTONIC nanoseconds of a time on this clock.
+    pub fn monotonic_ns_at(&self, seconds: f64) -> u64 {
+        (self.epoch_ns as i128 + (seconds * 1e9).round() as i128).max(0) as u64
+    }
+}
+
+/// CLOCK_MONOTONIC in nanoseconds.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into the timespec we own; CLOCK_MONOTONIC always exists.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monotonic_and_convertible() {
+        let clock = Clock::start();
+        let a = clock.now_s();
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        let b = clock.now_s();
+        assert!(a >= 0.0 && b - a >= 0.002, "{a} {b}");
+        let ns = clock.monotonic_ns_at(b);
+        assert!((clock.seconds_at(ns) - b).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,42 @@
+//! SEM frames: a [`FrameSource`] blocks until the next frame, fills a reused grey buffer
+//! and says when it was captured (on the daemon's [`Clock`](crate::hw::Clock)).
+use image::GrayImage;
+
+/// What comes with a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameMeta {
+    /// The source's frame counter; a gap means the source itself dropped frames.
+    pub sequence: u64,
+    /// Capture time on the daemon's clock, seconds.
+    pub captured_s: f64,
+    /// Ground truth, only from a simulated SEM.
+    pub truth: Option<FrameTruth>,
+}
+
+/// What a simulated SEM knows about the frame it rendered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTruth {
+    pub probe_in_view: bool,
+    pub angle_deg: f64,
+    pub force_nn: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("{device}: {reason}")]
+    Device { device: String, reason: String },
+    #[error("{device}: no frame within {timeout_ms} ms")]
+    Timeout { device: String, timeout_ms: u64 },
+    #[error("{device}: end of stream")]
+    EndOfStream { device: String },
+}
+
+/// A source of SEM frames (capture card, frame pipe, simulated SEM).
+pub trait FrameSource: Send {
+    /// A short description for logs, e.g. `v4l2:/dev/video0 640x480 GREY`.
+    fn name(&self) -> &str;
+
+    /// Blocks until the next frame, writes it into `frame` (reusing its buffer when the
+    /// size is unchanged) and returns its metadata.
+    fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError>;
+}

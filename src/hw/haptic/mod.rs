@@ -1,0 +1,34 @@
+//! The operator's stylus: a [`HapticDevice`] gives position and velocity and takes a
+//! force, in its own frame (millimetres, newtons).
+use nalgebra::Vector3;
+
+use crate::control::HapticSample;
+
+#[derive(Debug, thiserror::Error)]
+pub enum HapticError {
+    #[error("{device}: cannot open: {reason}")]
+    Open { device: String, reason: String },
+    #[error("{device}: device lost: {reason}")]
+    Lost { device: String, reason: String },
+    #[error("{device}: {reason}")]
+    Device { device: String, reason: String },
+}
+
+pub trait HapticDevice: Send {
+    fn name(&self) -> &str;
+
+    /// Whether forces can be rendered (a plain joystick cannot).
+    fn has_force_feedback(&self) -> bool {
+        true
+    }
+
+    /// The stylus now (`now_s` on the daemon clock, for devices that need it).
+    fn read(&mut self, now_s: f64) -> Result<HapticSample, HapticError>;
+
+    /// The force to render until the next call.
+    fn write_force(&mut self, force_n: Vector3<f64>) -> Result<(), HapticError>;
+
+    /// Turns force output on or off; off must leave the stylus free.
+    fn set_forces_enabled(&mut self, enabled: bool) -> Result<(), HapticError>;
+}
+pub mod sim;

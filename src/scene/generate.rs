@@ -1,0 +1,189 @@
+//! Generators of whole sessions, deterministic from a seed: random-order mixed sets like
+//! the public `mixed` sample, time sequences like `sequence` (an operator pressing and
+//! releasing, magnification jumps, the probe now and then out of view), and the test
+//! suite that spans every condition of scene.md for the tracker's accuracy tests.
+
+use super::geometry::Entry;
+use super::rng::{sub_seed, Rng};
+use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
+use super::spec::{FrameSpec, Look, Style};
+use crate::config::{Threshold, DEFAULT_WINDOW_DEG};
+
+/// Share of each style in mixed sets (as in the public `mixed` sample).
+const STYLE_WEIGHTS: [(Style, f64); 4] = [
+    (Style::Clean, 0.2),
+    (Style::Clutter, 0.2),
+    (Style::Noisy, 0.37),
+    (Style::Harsh, 0.23),
+];
+/// Share of blank frames (no probe in view) in generated sessions.
+pub const BLANK_FRACTION: f64 = 0.05;
+
+/// A style's look with per-frame counts and levels drawn around the preset.
+pub fn varied_look(style: Style, rng: &mut Rng) -> Look {
+    let mut look = style.look();
+    let (particles, scratches) = match style {
+        Style::Clean => ((1, 4), (0, 0)),
+        Style::Clutter => ((8, 16), (3, 7)),
+        Style::Noisy => ((2, 7), (0, 2)),
+        Style::Harsh => ((10, 20), (3, 7)),
+    };
+    look.particles = rng.int(particles.0, particles.1);
+    look.scratches = rng.int(scratches.0, scratches.1);
+    look.substrate = look.substrate.map(|level| level + rng.uniform(-12.0, 12.0));
+    look.background += rng.uniform(-3.0, 3.0);
+    look
+}
+
+/// A frame of `setup` with a random apex placement, substrate and look.
+pub fn random_frame(
+    setup: &Setup,
+    style: Style,
+    magnification: f64,
+    angle_deg: f64,
+    rng: &mut Rng,
+) -> FrameSpec {
+    let mut spec = setup.frame(style, angle_deg, magnification, rng.next_u64());
+    spec.look = varied_look(style, rng);
+    spec.apex_px = random_apex(setup, rng);
+    spec.substrate_gap_um = rng.uniform(-1.5, 5.5);
+    spec.substrate_tilt_deg = rng.uniform(-6.0, 6.0);
+    spec.blank = rng.chance(BLANK_FRACTION);
+    spec
+}
+
+fn random_apex(setup: &Setup, rng: &mut Rng) -> [f64; 2] {
+    [
+        rng.uniform(0.22, 0.78) * f64::from(setup.width),
+        rng.uniform(0.23, 0.8) * f64::from(setup.height),
+    ]
+}
+
+fn pick_style(rng: &mut Rng) -> Style {
+    let mut u = rng.unit();
+    for (style, weight) in STYLE_WEIGHTS {
+        if u < weight {
+            return style;
+        }
+        u -= weight;
+    }
+    Style::Harsh
+}
+
+/// Mostly uniform in +-20 deg, with the round values an experimenter sets by hand.
+fn pick_angle(rng: &mut Rng) -> f64 {
+    if rng.chance(0.3) {
+        [0.0, 5.0, -5.0, 20.0, -20.0][rng.int(0, 4) as usize]
+    } else {
+        rng.uniform(-20.0, 20.0)
+    }
+}
+
+impl Session {
+    /// `n` frames of one random probe in random order: magnifications, angles, styles,
+    /// apex placements and blank frames all mixed (like the public `mixed` sample).
+    pub fn mixed(seed: u64, n: usize, width: u32, height: u32) -> Session {
+        let setup = Setup::random(sub_seed(seed, 1), width, height);
+        Session::mixed_for(&setup, seed, n)
+    }
+
+    /// Like [`Session::mixed`] for a given setup.
+    pub fn mixed_for(setup: &Setup, seed: u64, n: usize) -> Session {
+        let mut rng = Rng::new(sub_seed(seed, 2));
+        let frames = (0..n)
+            .map(|_| {
+                let style = pick_style(&mut rng);
+                let mag = MAGNIFICATIONS[rng.int(0, 5) as usize];
+                let angle = pick_angle(&mut rng);
+                random_frame(setup, style, mag, angle, &mut rng)
+            })
+            .collect();
+        Session {
+            reference: setup.reference(seed),
+            frames,
+            times_s: (0..n).map(|k| k as f64 / FRAME_RATE_HZ).collect(),
+            threshold: Threshold::Otsu,
+            window_deg: DEFAULT_WINDOW_DEG,
+            click_seed: sub_seed(seed, 3),
+        }
+    }
+
+    /// `n` frames at 60 Hz of an operator pressing and releasing (the angle follows a
+    /// sine of amplitude 12-20 deg), the probe drifting slowly, jumping when the
+    /// magnification changes, and now and then out of view (like `sequence`).
+    pub fn sequence(seed: u64, n: usize, width: u32, height: u32) -> Session {
+        let setup = Setup::random(sub_seed(seed, 1), width, height);
+        let mut rng = Rng::new(sub_seed(seed, 2));
+        let style = pick_style(&mut rng);
+        let amplitude = rng.uniform(12.0, 20.0);
+        let period = rng.uniform(36.0, 60.0);
+        let mut mag = MAGNIFICATIONS[rng.int(1, 3) as usize];
+        let mut apex = random_apex(&setup, &mut rng);
+        let mut blank_left = 0u32;
+        let mut frames = Vec::with_capacity(n);
+        for k in 0..n {
+            let angle = amplitude * (std::f64::consts::TAU * k as f64 / period).sin();
+            if k > 0 && rng.chance(0.06) {
+                mag = MAGNIFICATIONS[rng.int(0, 5) as usize];
+                apex = random_apex(&setup, &mut rng);
+            } else {
+                apex = drift(&setup, apex, &mut rng);
+            }
+            if blank_left == 0 && rng.chance(0.015) {
+                blank_left = rng.int(1, 4);
+            }
+            let mut spec = random_frame(&setup, style, mag, angle, &mut rng);
+            spec.apex_px = apex;
+            spec.blank = blank_left > 0;
+            blank_left = blank_left.saturating_sub(1);
+            frames.push(spec);
+        }
+        let look = style.look();
+        Session {
+            reference: setup.reference(seed),
+            frames,
+            times_s: (0..n).map(|k| k as f64 / FRAME_RATE_HZ).collect(),
+            threshold: Threshold::Level((0.5 * (look.background + look.probe)).round() as u8),
+            window_deg: DEFAULT_WINDOW_DEG,
+            click_seed: sub_seed(seed, 3),
+        }
+    }
+}
+
+/// A few pixels of random drift, kept inside the apex placement range.
+fn drift(setup: &Setup, apex: [f64; 2], rng: &mut Rng) -> [f64; 2] {
+    let (w, h) = (f64::from(setup.width), f64::from(setup.height));
+    [
+        (apex[0] + 3.0 * rng.normal()).clamp(0.22 * w, 0.78 * w),
+        (apex[1] + 3.0 * rng.normal()).clamp(0.23 * h, 0.8 * h),
+    ]
+}
+
+/// The tracker's accuracy suite: `sessions` sessions of `frames_per_session` frames
+/// each, together spanning every condition of scene.md: magnification 1000x-8000x
+/// (log-uniform), both entry sides (alternating), base orientation within +-35 deg,
+/// deflections within +-20 deg, every style in equal shares, blank frames, 640x480 and
+/// (every third session) 1280x960, all in random order. Deterministic from `seed`.
+pub fn suite(seed: u64, sessions: usize, frames_per_session: usize) -> Vec<Session> {
+    (0..sessions)
+        .map(|i| {
+            let session_seed = sub_seed(seed, 100 + i as u64);
+            let (w, h) = if i % 3 == 2 { (1280, 960) } else { (640, 480) };
+            let mut setup = Setup::random(session_seed, w, h);
+            setup.entry = if i % 2 == 0 {
+                Entry::Left
+            } else {
+                Entry::Right
+            };
+            let mut session = Session::mixed_for(&setup, session_seed, frames_per_session);
+            let mut rng = Rng::new(sub_seed(session_seed, 4));
+            for (k, frame) in session.frames.iter_mut().enumerate() {
+                let style = Style::ALL[(k + i) % 4];
+                let mag = rng.log_uniform(1000.0, 8000.0).round();
+                let angle = rng.uniform(-20.0, 20.0);
+                *frame = random_frame(&setup, style, mag, angle, &mut rng);
+            }
+            session
+        })
+        .collect()
+}

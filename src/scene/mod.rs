@@ -1,0 +1,57 @@
+//! Synthetic SEM frames with ground truth (issue 3): the scene of scene.md rendered from a
+//! seed, for the tracker's accuracy tests, the simulated lab, benches and the demo.
+//!
+//! A [`FrameSpec`] fixes everything about a frame: size, magnification, the probe
+//! ([`ProbeGeometry`]: an elastica-bent beam with a rigid pyramid), its pose (entry side,
+//! base orientation, tip angle, apex pixel), the look ([`Look`] knobs or a [`Style`]
+//! preset: noise, blur, scan-line jitter, shading, particles, scratches, substrate) and a
+//! seed. [`render_into`] draws it into a reused 8-bit frame and returns the [`Truth`]
+//! (angle, force, apex, the true red/blue/green edges); the same spec gives the same
+//! bytes on every run.
+//!
+//! [`Session`] writes the on-disk layout of scene.md (probe.toml with calibration clicks,
+//! reference.png, frames/, truth.csv) for random-order mixed sets and time sequences;
+//! [`suite`] generates the tracker's accuracy suite spanning every condition.
+//!
+//! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
+//! blurred, so the truth is exact to the rasteriser's float precision. The physics of
+//! the bent beam is [`crate::model`]'s exact elastica; nothing here duplicates it.
+mod blur;
+mod clutter;
+mod generate;
+mod geometry;
+mod raster;
+mod render;
+pub mod rng;
+mod session;
+mod spec;
+
+use std::cell::RefCell;
+
+use image::GrayImage;
+
+pub use clutter::{Particle, Scratch};
+pub use generate::{random_frame, suite, varied_look, BLANK_FRACTION};
+pub use geometry::{px_per_um, Edges, Entry, Pose, ProbeGeometry, Segment, FIELD_WIDTH_AT_1X_UM};
+pub use render::{force_nn, Renderer, Truth};
+pub use session::{
+    Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
+};
+pub use spec::{FrameSpec, Look, Style};
+
+thread_local! {
+    static RENDERER: RefCell<Renderer> = RefCell::new(Renderer::new());
+}
+
+/// Renders `spec` into `frame` with this thread's [`Renderer`] (its buffers are reused,
+/// so after the first frame of a size nothing is allocated) and returns the truth.
+pub fn render_into(spec: &FrameSpec, frame: &mut GrayImage) -> Truth {
+    RENDERER.with(|r| r.borrow_mut().render_into(spec, frame))
+}
+
+/// Renders `spec` into a new frame.
+pub fn render(spec: &FrameSpec) -> (GrayImage, Truth) {
+    let mut frame = GrayImage::new(spec.width, spec.height);
+    let truth = render_into(spec, &mut frame);
+    (frame, truth)
+}

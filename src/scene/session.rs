@@ -1,0 +1,293 @@
+//! Recorded sessions on disk, in the layout of scene.md: `probe.toml` (cantilever,
+//! tracker settings, calibration clicks), `reference.png` (the undeformed probe, angle
+//! zero), `frames/frame_00000.png ...` and `truth.csv`. A [`Session`] is a list of
+//! [`FrameSpec`]s sharing one probe, entry side and base orientation; it is built either
+//! as a random-order mixed set ([`Session::mixed`]) or as a time sequence of an operator
+//! pressing and releasing, with magnification jumps ([`Session::sequence`]).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use image::{GrayImage, ImageBuffer, Luma};
+
+use super::geometry::{Entry, ProbeGeometry};
+use super::render::{Renderer, Truth};
+use super::rng::{sub_seed, Rng};
+use super::spec::{FrameSpec, Style};
+use crate::config::Threshold;
+
+/// Magnifications an operator picks from (those of the public samples).
+pub const MAGNIFICATIONS: [f64; 6] = [1000.0, 1500.0, 2000.0, 3500.0, 5000.0, 8000.0];
+/// The SEM's frame rate, for `t_s`.
+pub const FRAME_RATE_HZ: f64 = 60.0;
+
+/// Writing a session failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: cannot encode frame: {source}")]
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+}
+
+/// How frames are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameFormat {
+    Png,
+    /// Binary PGM (P5).
+    Pgm,
+    /// 16-bit grey TIFF, as some SEMs write (8-bit levels times 257).
+    Tiff16,
+}
+
+impl FrameFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            FrameFormat::Png => "png",
+            FrameFormat::Pgm => "pgm",
+            FrameFormat::Tiff16 => "tif",
+        }
+    }
+}
+
+/// Pixels a person clicked on each tracked edge of the reference image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Clicks {
+    pub red: Vec<[f64; 2]>,
+    pub blue: Vec<[f64; 2]>,
+    pub green: Vec<[f64; 2]>,
+}
+
+/// One probe seen in a series of frames, with its calibration frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Session {
+    /// The calibration frame: undeformed probe (angle 0).
+    pub reference: FrameSpec,
+    pub frames: Vec<FrameSpec>,
+    /// Time stamp of each frame, seconds.
+    pub times_s: Vec<f64>,
+    pub threshold: Threshold,
+    pub window_deg: f64,
+    /// Seed of the calibration clicks' errors.
+    pub click_seed: u64,
+}
+
+impl Session {
+    /// The probe shared by all frames.
+    pub fn probe(&self) -> &ProbeGeometry {
+        &self.reference.probe
+    }
+
+    /// Where a person would click on the red, blue and green edges of the reference
+    /// image: three points each, off by up to about a pixel, to 0.1 px.
+    pub fn clicks(&self) -> Clicks {
+        let mut renderer = Renderer::new();
+        let truth = renderer.render_canvas(&self.reference);
+        let mut rng = Rng::new(self.click_seed);
+        let mut click = |p: [f64; 2]| {
+            let jitter =
+                |v: f64, rng: &mut Rng| (10.0 * (v + rng.uniform(-0.7, 0.7))).round() / 10.0;
+            let x = jitter(p[0], &mut rng);
+            [x, jitter(p[1], &mut rng)]
+        };
+        let Some(edges) = truth.edges else {
+            return Clicks {
+                red: vec![],
+                blue: vec![],
+                green: vec![],
+            };
+        };
+        let along = |s: &super::geometry::Segment, t: f64| {
+            [
+                s.from[0] + t * (s.to[0] - s.from[0]),
+                s.from[1] + t * (s.to[1] - s.from[1]),
+            ]
+        };
+        // The reference beam is straight, so red clicks may reach beyond the end block.
+        let h_px = self.probe().pyramid_height_um * self.reference.px_per_um();
+        let red_len = edges.red.length();
+        let red = [1.75, 1.0, 0.25].map(|k| along(&edges.red, 1.0 - k * h_px / red_len));
+        Clicks {
+            red: red.into_iter().map(&mut click).collect(),
+            blue: [0.15, 0.5, 0.85]
+                .map(|t| along(&edges.blue, t))
+                .into_iter()
+                .map(&mut click)
+                .collect(),
+            green: [0.85, 0.5, 0.15]
+                .map(|t| along(&edges.green, t))
+                .into_iter()
+                .map(&mut click)
+                .collect(),
+        }
+    }
+
+    /// The `probe.toml` text (parses with [`crate::config::Config::load`]).
+    pub fn probe_toml(&self) -> String {
+        let probe = self.probe();
+        let clicks = self.clicks();
+        let points = |v: &[[f64; 2]]| {
+            let items: Vec<String> = v
+                .iter()
+                .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
+                .collect();
+            format!("[{}]", items.join(", "))
+        };
+        format!(
+            "# Probe and tracker settings for one recorded session.\n[cantilever]\n\
+             length_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n[tracker]\n\
+             threshold = {}\nwindow_deg = {:.1}\n\n[tracker.calibration]\n\
+             reference_image = \"reference.png\"  # relative to this file\n\
+             # pixels marked on each tip edge in the reference image; x right, y down\n\
+             red = {}\nblue = {}\ngreen = {}\n",
+            probe.length_um,
+            probe.spring_constant_n_per_m,
+            self.threshold,
+            self.window_deg,
+            points(&clicks.red),
+            points(&clicks.blue),
+            points(&clicks.green),
+        )
+    }
+
+    /// Writes the session into `dir` (created if needed) and returns every frame's truth.
+    pub fn write(&self, dir: &Path, format: FrameFormat) -> Result<Vec<Truth>, SessionError> {
+        let frames_dir = dir.join("frames");
+        std::fs::create_dir_all(&frames_dir).map_err(|source| SessionError::Io {
+            path: frames_dir.clone(),
+            source,
+        })?;
+        write_text(&dir.join("probe.toml"), &self.probe_toml())?;
+        let mut renderer = Renderer::new();
+        let mut frame = GrayImage::new(1, 1);
+        renderer.render_into(&self.reference, &mut frame);
+        save(&frame, &dir.join("reference.png"), FrameFormat::Png)?;
+        let mut csv = String::from(
+            "frame,detected,angle_deg,force_nN,tip_x,tip_y,magnification,px_per_um,style,t_s\n",
+        );
+        let mut truths = Vec::with_capacity(self.frames.len());
+        for (k, spec) in self.frames.iter().enumerate() {
+            let truth = renderer.render_into(spec, &mut frame);
+            let name = format!("frame_{k:05}.{}", format.extension());
+            save(&frame, &frames_dir.join(&name), format)?;
+            let t_s = self
+                .times_s
+                .get(k)
+                .copied()
+                .unwrap_or(k as f64 / FRAME_RATE_HZ);
+            csv_row(&mut csv, &name, &truth, spec.look.style_name, t_s);
+            truths.push(truth);
+        }
+        write_text(&dir.join("truth.csv"), &csv)?;
+        Ok(truths)
+    }
+}
+
+/// One truth.csv row in the samples' number formats; blank frames get `nan`.
+fn csv_row(csv: &mut String, name: &str, t: &Truth, style: &str, t_s: f64) {
+    let _ = writeln!(
+        csv,
+        "{name},{},{:.6},{:.4},{:.3},{:.3},{:.0},{:.5},{style},{t_s:.6}",
+        u8::from(t.probe_in_view),
+        t.angle_deg,
+        t.force_nn,
+        t.tip_x,
+        t.tip_y,
+        t.magnification,
+        t.px_per_um,
+    );
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), SessionError> {
+    std::fs::write(path, text).map_err(|source| SessionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn save(frame: &GrayImage, path: &Path, format: FrameFormat) -> Result<(), SessionError> {
+    let result = match format {
+        FrameFormat::Png => frame.save_with_format(path, image::ImageFormat::Png),
+        FrameFormat::Pgm => frame.save_with_format(path, image::ImageFormat::Pnm),
+        FrameFormat::Tiff16 => {
+            let wide: ImageBuffer<Luma<u16>, Vec<u16>> =
+                ImageBuffer::from_fn(frame.width(), frame.height(), |x, y| {
+                    Luma([u16::from(frame.get_pixel(x, y)[0]) * 257])
+                });
+            wide.save_with_format(path, image::ImageFormat::Tiff)
+        }
+    };
+    result.map_err(|source| SessionError::Encode {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The fixed part of a session: probe, frame size, entry side, base orientation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Setup {
+    pub probe: ProbeGeometry,
+    pub width: u32,
+    pub height: u32,
+    pub entry: Entry,
+    pub base_deg: f64,
+}
+
+impl Setup {
+    /// A random setup (probe within scene.md's ranges, base within +-35 deg).
+    pub fn random(seed: u64, width: u32, height: u32) -> Self {
+        let mut rng = Rng::new(seed);
+        let mut probe = ProbeGeometry::random(rng.next_u64());
+        // As written in probe.toml, so the config reproduces the true forces exactly.
+        probe.length_um = (probe.length_um * 1e3).round() / 1e3;
+        probe.spring_constant_n_per_m = (probe.spring_constant_n_per_m * 1e4).round() / 1e4;
+        Setup {
+            probe,
+            width,
+            height,
+            entry: if rng.chance(0.5) {
+                Entry::Left
+            } else {
+                Entry::Right
+            },
+            base_deg: rng.uniform(-35.0, 35.0),
+        }
+    }
+
+    /// A frame of this setup with everything else at neutral values.
+    pub fn frame(&self, style: Style, angle_deg: f64, magnification: f64, seed: u64) -> FrameSpec {
+        FrameSpec {
+            width: self.width,
+            height: self.height,
+            magnification,
+            probe: self.probe,
+            entry: self.entry,
+            base_deg: self.base_deg,
+            ..FrameSpec::new(style, angle_deg, seed)
+        }
+    }
+
+    /// The calibration frame: clean, angle 0, at 2000x on 640 px (same field on any size).
+    pub fn reference(&self, seed: u64) -> FrameSpec {
+        let mut rng = Rng::new(sub_seed(seed, 11));
+        let mut spec = self.frame(Style::Clean, 0.0, 2000.0, rng.next_u64());
+        let x = rng.uniform(0.36, 0.46);
+        let x = if self.entry == Entry::Left {
+            x
+        } else {
+            1.0 - x
+        };
+        spec.apex_px = [
+            x * f64::from(self.width),
+            rng.uniform(0.4, 0.52) * f64::from(self.height),
+        ];
+        spec.look.substrate = None;
+        spec
+    }
+}

@@ -1,0 +1,179 @@
+//! What to render: the frame ([`FrameSpec`]), its look ([`Look`], the individual
+//! knobs) and the four presets of the public samples ([`Style`]: clean, clutter, noisy,
+//! harsh). The preset values were measured on the public sessions (docs/renderer.md).
+
+use super::geometry::{px_per_um, Entry, Pose, ProbeGeometry};
+
+/// The looks of the public samples, from an easy frame to a hard one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Style {
+    /// Low noise, a few particles, no substrate.
+    Clean,
+    /// Moderate noise, many particles and scratches, substrate.
+    Clutter,
+    /// Strong noise, some particles, substrate.
+    Noisy,
+    /// Strongest noise and blur, low contrast, much clutter, substrate.
+    Harsh,
+}
+
+impl Style {
+    pub const ALL: [Style; 4] = [Style::Clean, Style::Clutter, Style::Noisy, Style::Harsh];
+
+    /// The name written in truth.csv.
+    pub fn name(self) -> &'static str {
+        match self {
+            Style::Clean => "clean",
+            Style::Clutter => "clutter",
+            Style::Noisy => "noisy",
+            Style::Harsh => "harsh",
+        }
+    }
+
+    /// The preset's knobs (typical counts; generators vary them per frame).
+    pub fn look(self) -> Look {
+        let base = Look {
+            style_name: self.name(),
+            noise_sigma: 6.0,
+            blur_sigma_px: 0.71,
+            jitter_fraction: 0.0,
+            background: 70.0,
+            shading: 18.0,
+            probe: 214.5,
+            probe_ramp: 12.0,
+            outline: 4.0,
+            particles: 3,
+            scratches: 0,
+            substrate: None,
+        };
+        match self {
+            Style::Clean => base,
+            Style::Clutter => Look {
+                noise_sigma: 14.0,
+                blur_sigma_px: 0.92,
+                jitter_fraction: 0.02,
+                background: 80.0,
+                probe: 209.0,
+                particles: 12,
+                scratches: 5,
+                substrate: Some(118.0),
+                ..base
+            },
+            Style::Noisy => Look {
+                noise_sigma: 22.0,
+                blur_sigma_px: 1.12,
+                jitter_fraction: 0.02,
+                background: 75.0,
+                probe: 204.0,
+                particles: 5,
+                scratches: 1,
+                substrate: Some(110.0),
+                ..base
+            },
+            Style::Harsh => Look {
+                noise_sigma: 30.0,
+                blur_sigma_px: 1.52,
+                jitter_fraction: 0.05,
+                background: 96.0,
+                probe: 189.0,
+                particles: 15,
+                scratches: 5,
+                substrate: Some(128.0),
+                ..base
+            },
+        }
+    }
+}
+
+/// The individual knobs of a frame's appearance. Grey levels are on the 8-bit scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Look {
+    /// Written in truth.csv's `style` column.
+    pub style_name: &'static str,
+    /// Standard deviation of the white Gaussian noise (scene.md: up to 30).
+    pub noise_sigma: f64,
+    /// Gaussian blur of the beam spot, pixels (scene.md: 0.8 to 1.6; the area
+    /// integration of the pixel adds its own 0.29 px).
+    pub blur_sigma_px: f64,
+    /// Fraction of rows shifted sideways by one pixel (scan-line jitter).
+    pub jitter_fraction: f64,
+    /// Mean background level.
+    pub background: f64,
+    /// Amplitude of the slow background shading (+- grey levels).
+    pub shading: f64,
+    /// Probe level at the frame's centre.
+    pub probe: f64,
+    /// Rise of the probe level from the left edge to the right edge of the frame.
+    pub probe_ramp: f64,
+    /// Extra brightness of a one-pixel band along the probe's outline (edge effect).
+    pub outline: f64,
+    /// Number of bright particles.
+    pub particles: u32,
+    /// Number of straight scratches.
+    pub scratches: u32,
+    /// Level of the substrate surface below the apex, or none.
+    pub substrate: Option<f64>,
+}
+
+/// Everything that determines one frame; rendering it is a pure function of this.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameSpec {
+    pub width: u32,
+    pub height: u32,
+    pub magnification: f64,
+    pub probe: ProbeGeometry,
+    pub entry: Entry,
+    /// Tilt of the undeformed beam, degrees (see [`Pose::base_deg`]).
+    pub base_deg: f64,
+    /// Tip angle phi0, degrees CCW on screen, 0 in the reference.
+    pub angle_deg: f64,
+    /// Where the apex lands, pixels.
+    pub apex_px: [f64; 2],
+    /// Perpendicular distance of the substrate's edge below the apex, micrometres
+    /// (negative: the apex overlaps the substrate as seen from the SEM).
+    pub substrate_gap_um: f64,
+    /// Tilt of the substrate's edge, degrees CCW on screen.
+    pub substrate_tilt_deg: f64,
+    pub look: Look,
+    /// No probe in view (the tracker must report nothing).
+    pub blank: bool,
+    /// Seed of everything random in the frame (clutter, shading, noise, jitter).
+    pub seed: u64,
+}
+
+impl FrameSpec {
+    /// A 640x480 frame of the typical probe entering from the left at `angle_deg`,
+    /// 2000x, apex near the centre; adjust fields from here.
+    pub fn new(style: Style, angle_deg: f64, seed: u64) -> Self {
+        FrameSpec {
+            width: 640,
+            height: 480,
+            magnification: 2000.0,
+            probe: ProbeGeometry::typical(),
+            entry: Entry::Left,
+            base_deg: -18.0,
+            angle_deg,
+            apex_px: [330.0, 260.0],
+            substrate_gap_um: 1.5,
+            substrate_tilt_deg: 0.0,
+            look: style.look(),
+            blank: false,
+            seed,
+        }
+    }
+
+    pub fn px_per_um(&self) -> f64 {
+        px_per_um(self.width, self.magnification)
+    }
+
+    /// The probe's placement in this frame.
+    pub fn pose(&self) -> Pose {
+        Pose {
+            entry: self.entry,
+            base_deg: self.base_deg,
+            angle_deg: self.angle_deg,
+            apex_px: self.apex_px,
+            px_per_um: self.px_per_um(),
+        }
+    }
+}

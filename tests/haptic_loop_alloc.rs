@@ -1,0 +1,159 @@
+//! The 1 kHz loop must not allocate in steady state. A counting global allocator counts
+//! allocations made on the haptic loop's thread only (the fake haptic device marks that
+//! thread on its first read); the devices here are atomics-only so they add nothing.
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use image::GrayImage;
+use nalgebra::Vector3;
+use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
+use nanoforce::daemon::{Daemon, Devices, Estimator, FrameEstimate, LoopOptions, RunOptions};
+use nanoforce::hw::daq::{DaqError, RateOutput};
+use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
+use nanoforce::hw::haptic::{HapticDevice, HapticError};
+use nanoforce::hw::Clock;
+
+thread_local! {
+    static ON_LOOP_THREAD: Cell<bool> = const { Cell::new(false) };
+}
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static LOOP_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+struct Counting;
+
+// SAFETY: forwards to the system allocator; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) && ON_LOOP_THREAD.with(Cell::get) {
+            LOOP_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+struct Frames(Clock, u64);
+impl FrameSource for Frames {
+    fn name(&self) -> &str {
+        "frames"
+    }
+    fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError> {
+        std::thread::sleep(Duration::from_millis(16));
+        if frame.width() != 32 {
+            *frame = GrayImage::new(32, 32);
+        }
+        self.1 += 1;
+        Ok(FrameMeta {
+            sequence: self.1,
+            captured_s: self.0.now_s(),
+            truth: None,
+        })
+    }
+}
+
+/// Alternates the force so the ramp keeps retargeting.
+struct Tracker(u64);
+impl Estimator for Tracker {
+    fn estimate(&mut self, _frame: &GrayImage) -> FrameEstimate {
+        self.0 += 1;
+        FrameEstimate {
+            detected: true,
+            angle_deg: Some(1.0),
+            force_nn: Some(if self.0 % 2 == 0 { 800.0 } else { 1200.0 }),
+            apex_px: Some([3.0, 4.0]),
+            confidence: 0.9,
+        }
+    }
+}
+
+struct Stage(Arc<AtomicU64>);
+impl RateOutput for Stage {
+    fn name(&self) -> &str {
+        "stage"
+    }
+    fn write_velocity(&mut self, _now_s: f64, v: Vector3<f64>) -> Result<(), DaqError> {
+        if v.x > 0.0 {
+            self.0.fetch_max(v.x.to_bits(), Ordering::Relaxed);
+        }
+        Ok(())
+    }
+}
+
+struct Haptic;
+impl HapticDevice for Haptic {
+    fn name(&self) -> &str {
+        "haptic"
+    }
+    fn read(&mut self, now_s: f64) -> Result<HapticSample, HapticError> {
+        ON_LOOP_THREAD.with(|c| c.set(true));
+        // Centred for the first 100 ms (to engage), then a slow lateral sweep.
+        let x = if now_s < 0.1 {
+            0.0
+        } else {
+            5.0 + (now_s * 3.0).sin()
+        };
+        Ok(HapticSample {
+            position_mm: Vector3::new(x, 0.0, 0.0),
+            velocity_mm_s: Vector3::zeros(),
+        })
+    }
+    fn write_force(&mut self, _force_n: Vector3<f64>) -> Result<(), HapticError> {
+        Ok(())
+    }
+    fn set_forces_enabled(&mut self, _enabled: bool) -> Result<(), HapticError> {
+        Ok(())
+    }
+}
+
+#[test]
+fn haptic_loop_does_not_allocate_in_steady_state() {
+    let clock = Clock::start();
+    let velocity = Arc::new(AtomicU64::new(0));
+    let devices = Devices {
+        frames: Box::new(Frames(clock, 0)),
+        estimator: Box::new(Tracker(0)),
+        stage: Box::new(Stage(velocity.clone())),
+        haptic: Box::new(Haptic),
+    };
+    let options = RunOptions {
+        clock,
+        loop_options: LoopOptions {
+            rt_priority: None,
+            lock_memory: false,
+            telemetry_every: 1,
+            ..LoopOptions::default()
+        },
+        session_dir: Some(tempfile::tempdir().unwrap().keep()),
+        ..RunOptions::default()
+    };
+    let handle = Daemon::start(TeleopGains::default(), devices, options).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(handle.loop_shared.state(), SafetyState::Engaged);
+    COUNTING.store(true, Ordering::SeqCst);
+    let ticks_before = handle.loop_shared.ticks.load(Ordering::SeqCst);
+    std::thread::sleep(Duration::from_millis(700));
+    COUNTING.store(false, Ordering::SeqCst);
+    let ticks = handle.loop_shared.ticks.load(Ordering::SeqCst) - ticks_before;
+    handle.stop();
+    handle.wait().unwrap();
+    assert!(ticks > 400, "the loop ran ({ticks} ticks)");
+    assert!(
+        f64::from_bits(velocity.load(Ordering::SeqCst)) > 0.0,
+        "and moved the stage"
+    );
+    assert_eq!(
+        LOOP_ALLOCATIONS.load(Ordering::SeqCst),
+        0,
+        "allocations on the loop thread"
+    );
+}
