@@ -56,3 +56,26 @@ fn profile_loop() {
     }
     println!("per frame {:?}", t0.elapsed() / n);
 }
+
+#[test]
+#[ignore]
+fn debug_apex_offsets() {
+    for name in ["mixed", "sequence"] {
+        let s = sample(name);
+        let est = s.run(false);
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+        for (t, e) in s.truth.iter().zip(&est) {
+            if let Some(a) = e.apex_px {
+                let (dx, dy) = (a[0] - t.tip[0], a[1] - t.tip[1]);
+                println!(
+                    "{name} {} mag {} dx {dx:+.3} dy {dy:+.3}",
+                    t.frame, t.magnification
+                );
+                sx += dx;
+                sy += dy;
+                n += 1.0;
+            }
+        }
+        println!("{name}: mean dx {:+.3} dy {:+.3}", sx / n, sy / n);
+    }
+}

@@ -375,6 +375,7 @@ fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
         end: at(tf),
         line: loc.line,
         bend_from: None,
+        bend0: 0.0,
     }
 }
 
@@ -449,9 +450,11 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         ));
     }
     let height = -edges[RED].offset;
+    let bend_tau = dot(along(edges[RED].normal), sub(far_point(BLUE), apex));
     Ok(Template {
         edges,
         apex,
         height,
+        bend_tau,
     })
 }

@@ -14,7 +14,7 @@
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
 use super::geometry::{clip_to_rect, dot, norm, rotate, sub, wrap_pi};
-use super::template::{Pose, Template};
+use super::template::{Pose, Template, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
 const SCALE_MIN: f64 = 0.05;
@@ -25,6 +25,12 @@ const SCALE_STEP: f64 = 1.03;
 const MIN_HEIGHT_PX: f64 = 10.0;
 /// Hypotheses kept for the full (walking) evaluation.
 const SHORTLIST: usize = 10;
+/// A line of a hypothesis must cover at least this much of its predicted segment.
+const MIN_MEMBER_PX: f64 = 3.0;
+const MIN_MEMBER_FRACTION: f64 = 0.4;
+/// Red is scored only this many tip heights beyond the start of the beam's bend: further
+/// back the beam may curve away from the tip's tangent.
+const RED_SCORE_HEIGHTS: f64 = 1.5;
 /// Gradient tolerance when walking a predicted edge, radians.
 const WALK_ANGLE_RAD: f64 = 0.25;
 
@@ -151,6 +157,10 @@ impl Search {
             for (e, m) in members.iter().enumerate() {
                 if let Some(i) = m {
                     cov[e] = cover(t, pose, e, cands, &list[*i]);
+                    // Every line of a hypothesis must be part of the tip it proposes.
+                    if cov[e].visible < MIN_MEMBER_PX || cov[e].fraction() < MIN_MEMBER_FRACTION {
+                        return None;
+                    }
                 }
             }
             Some((cov, cov.iter().map(Coverage::score).sum()))
@@ -308,11 +318,22 @@ fn end_margin(length: f64) -> f64 {
     1.5 + 0.05 * length
 }
 
+/// The stretch of edge `e` a hypothesis is scored on (red: only near the tip).
+fn segment(t: &Template, pose: &Pose, e: usize) -> ([f64; 2], [f64; 2]) {
+    if e == RED {
+        let (a, b) = t.red_near_tip(RED_SCORE_HEIGHTS);
+        let red = &t.edges[RED];
+        (t.place(pose, red.point(a)), t.place(pose, red.point(b)))
+    } else {
+        t.segment(pose, e)
+    }
+}
+
 /// Coverage of edge `e`'s predicted segment by candidate `c`'s profile.
 fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate) -> Coverage {
     let edge = &t.edges[e];
-    let (tip, far) = t.segment(pose, e);
-    let length = edge.length() * pose.scale;
+    let (tip, far) = segment(t, pose, e);
+    let length = norm(sub(far, tip));
     let t_tip = Candidates::t_of(c, tip);
     let t_far = Candidates::t_of(c, far);
     let dir = (t_far - t_tip).signum();
@@ -340,7 +361,7 @@ fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate)
 fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
     let line = t.line(pose, e);
     let normal_angle = line.normal[1].atan2(line.normal[0]);
-    let (tip, far) = t.segment(pose, e);
+    let (tip, far) = segment(t, pose, e);
     let length = norm(sub(far, tip));
     if length < 1.0 {
         return Coverage::default();

@@ -16,7 +16,7 @@
 
 use image::GrayImage;
 
-use super::geometry::{along, dot, norm, rotate, sub, Line};
+use super::geometry::{along, dot, rotate, sub, Line};
 
 /// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
@@ -48,9 +48,20 @@ pub struct Band {
     pub end: [f64; 2],
     /// Current line estimate (inward normal).
     pub line: Line,
-    /// For the beam edge: the free end, from which a cubic bend grows into the band.
+    /// For the beam edge: where the beam starts to bend (the back of the rigid block),
+    /// from which the cubic bend grows into the band.
     pub bend_from: Option<[f64; 2]>,
+    /// Starting bend: offset (pixels, along the inward normal) at [`BEND_UNIT_PX`] from
+    /// `bend_from`; the band follows the bent edge.
+    pub bend0: f64,
 }
+
+/// The band that may carry a bend (the beam edge).
+const RED_BAND: usize = 0;
+
+/// The bend coefficient is the offset of the beam edge from its free-end tangent at this
+/// distance beyond the start of the bend, pixels.
+pub const BEND_UNIT_PX: f64 = 100.0;
 
 /// What the fit found for one edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,8 +144,8 @@ struct EdgeFrame {
     origin: [f64; 2],
     normal0: [f64; 2],
     corner: [f64; 2],
-    /// Distance from the corner to the far end of the band (the bend's unit).
-    reach: f64,
+    /// +1 or -1: the sign of the along-coordinate from the free end towards the clamp.
+    towards: f64,
     curved: bool,
 }
 
@@ -172,7 +183,7 @@ impl Refiner {
                 origin: b.line.foot(mid),
                 normal0: b.line.normal,
                 corner: b.line.foot(corner),
-                reach: norm(sub(b.line.foot(mid), b.line.foot(corner))).max(1.0) * 2.0,
+                towards: dot(along(b.line.normal), sub(b.end, b.start)).signum(),
                 curved: b.bend_from.is_some(),
             });
         }
@@ -181,6 +192,7 @@ impl Refiner {
         }
         let mut x = [0.0; N_PARAMS];
         x[P_BLUR] = blur0;
+        x[P_BEND] = bands[RED_BAND].map_or(0.0, |b| b.bend0);
         self.init_photometry(&frames, &mut x);
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
@@ -244,10 +256,25 @@ impl Refiner {
         let before = self.samples.len();
         let raw = frame.as_raw();
         let width = frame.width() as usize;
+        // A bent beam edge: the band follows n . p = rho + bend0 * w^3.
+        let d = along(n);
+        let bend = b.bend_from.map(|from| {
+            let towards = dot(d, sub(b.end, b.start)).signum();
+            (dot(d, from), towards)
+        });
         let mut a = lo as i64;
         while a as f64 <= hi {
             // Centre of the band on this line: n_k * a + n_j * c = rho.
-            let centre = (b.line.rho - n[k] * a as f64) / n[j];
+            let mut centre = (b.line.rho - n[k] * a as f64) / n[j];
+            if let Some((u_from, towards)) = bend {
+                let p = if horizontal {
+                    [a as f64, centre]
+                } else {
+                    [centre, a as f64]
+                };
+                let w = (towards * (dot(d, p) - u_from)).max(0.0) / BEND_UNIT_PX;
+                centre += b.bend0 * w * w * w / n[j];
+            }
             let c0 = (centre - across).ceil().max(1.0) as i64;
             let c1 = (centre + across).floor().min(limit) as i64;
             for c in c0..=c1 {
@@ -494,13 +521,13 @@ fn accumulate_edge(
         wsum: 0.0,
     };
     let inv_blur = 1.0 / p.blur;
-    let towards_far = dot(p.along, sub(f.origin, f.corner)).signum();
+    let towards_far = f.towards;
     let corner_t = dot(p.along, sub(f.corner, f.origin));
     for s in samples.iter().step_by(step) {
         let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
         let u = p.along[0] * rel[0] + p.along[1] * rel[1];
         let w = if f.curved {
-            (towards_far * (u - corner_t)).max(0.0) / f.reach
+            (towards_far * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
         } else {
             0.0
         };
@@ -655,7 +682,10 @@ impl Default for Normal {
     }
 }
 
-/// Solves the damped normal equations with the fixed parameters held.
+/// Solves the damped normal equations with the fixed parameters held. The system is
+/// scaled to a unit diagonal first, so "no information about a parameter" (a bend with
+/// no bent pixels, a band of one flat level) is recognised relative to the others and
+/// that parameter is held instead of failing the solve.
 // Index loops mirror the textbook formulas of the small dense solves below.
 #[allow(clippy::needless_range_loop)]
 fn solve(
@@ -663,21 +693,33 @@ fn solve(
     g: &[f64; N_PARAMS],
     fixed: &[bool; N_PARAMS],
 ) -> Option<[f64; N_PARAMS]> {
-    let mut a = *h;
-    let mut b = *g;
+    let max_diag = (0..N_PARAMS).map(|i| h[i][i]).fold(0.0, f64::max);
+    if max_diag.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !max_diag.is_finite() {
+        return None;
+    }
+    let mut scale = [0.0; N_PARAMS];
     for i in 0..N_PARAMS {
-        if fixed[i] || a[i][i] <= 0.0 {
-            for k in 0..N_PARAMS {
-                a[i][k] = 0.0;
-                a[k][i] = 0.0;
-            }
-            a[i][i] = 1.0;
-            b[i] = 0.0;
-        } else {
-            a[i][i] *= 1.0 + 1e-6;
+        let held = fixed[i]
+            || h[i][i].partial_cmp(&(1e-14 * max_diag)) != Some(std::cmp::Ordering::Greater);
+        scale[i] = if held { 0.0 } else { 1.0 / h[i][i].sqrt() };
+    }
+    let mut a = [[0.0; N_PARAMS]; N_PARAMS];
+    let mut b = [0.0; N_PARAMS];
+    for i in 0..N_PARAMS {
+        for k in 0..N_PARAMS {
+            a[i][k] = h[i][k] * scale[i] * scale[k];
+        }
+        a[i][i] = if scale[i] == 0.0 { 1.0 } else { 1.0 + 1e-9 };
+        b[i] = g[i] * scale[i];
+    }
+    cholesky_solve(&mut a, &mut b);
+    for i in 0..N_PARAMS {
+        b[i] *= scale[i];
+        if !b[i].is_finite() {
+            return None;
         }
     }
-    cholesky_solve(&mut a, &mut b).then_some(b)
+    Some(b)
 }
 
 /// Variance factor of parameter `k` ((H^-1)_kk), free parameters only.
@@ -688,16 +730,22 @@ fn variance(h: &[[f64; N_PARAMS]; N_PARAMS], fixed: &[bool; N_PARAMS], k: usize)
     Some(x[k].max(0.0))
 }
 
-/// In-place Cholesky solve of a symmetric positive definite system; false if not SPD.
+/// In-place Cholesky solve of a symmetric positive semi-definite system; a parameter
+/// whose pivot vanishes (dependent on the others) is held at a zero step.
 #[allow(clippy::needless_range_loop)]
-fn cholesky_solve(a: &mut [[f64; N_PARAMS]; N_PARAMS], b: &mut [f64; N_PARAMS]) -> bool {
+fn cholesky_solve(a: &mut [[f64; N_PARAMS]; N_PARAMS], b: &mut [f64; N_PARAMS]) {
     for j in 0..N_PARAMS {
         let mut d = a[j][j];
         for k in 0..j {
             d -= a[j][k] * a[j][k];
         }
-        if d <= 1e-12 {
-            return false;
+        if d <= 1e-10 {
+            // No independent information left in this parameter: hold it.
+            for i in j + 1..N_PARAMS {
+                a[i][j] = 0.0;
+            }
+            a[j][j] = f64::INFINITY;
+            continue;
         }
         let d = d.sqrt();
         a[j][j] = d;
@@ -723,7 +771,6 @@ fn cholesky_solve(a: &mut [[f64; N_PARAMS]; N_PARAMS], b: &mut [f64; N_PARAMS]) 
         }
         b[i] = s / a[i][i];
     }
-    true
 }
 
 /// Applies a Gauss-Newton step with trust limits on the geometric parameters.
@@ -800,6 +847,7 @@ mod tests {
             end: line.foot([180.0, 70.0]),
             line,
             bend_from: None,
+            bend0: 0.0,
         };
         let mut r = Refiner::default();
         let fit = r
@@ -861,6 +909,7 @@ mod debug_refine {
             end: p1,
             line,
             bend_from: None,
+            bend0: 0.0,
         };
         let mut r = Refiner::default();
         let fit = r

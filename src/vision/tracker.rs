@@ -26,7 +26,7 @@ use crate::model::Cantilever;
 const COHERENT_TOL_RAD: f64 = 0.07;
 /// How much of the beam edge (in tip heights from the free end) is fitted: all of it
 /// that is in view, in practice; the bend term takes care of its curvature.
-const RED_SPAN_HEIGHTS: f64 = 60.0;
+const RED_SPAN_HEIGHTS: f64 = 4.0;
 /// Shortest band worth fitting, frame pixels.
 const MIN_BAND_PX: f64 = 10.0;
 /// Smallest confidence reported as a detection.
@@ -165,11 +165,11 @@ impl Tracker {
             apex: self.pyr.to_frame(hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
-        let first = bands(t, &pose, size, self.blur);
+        let first = bands(t, &pose, size, self.blur, 0.0);
         let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
         // Second pass on bands placed from the refined lines.
         let pose = refined_pose(t, &pose, &fit);
-        let bands = bands(t, &pose, size, self.blur);
+        let bands = bands(t, &pose, size, self.blur, fit.bend);
         let fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         let pose = refined_pose(t, &pose, &fit);
         Some(self.verdict(t, &hyp, &pose, &fit, &bands, size))
@@ -265,7 +265,7 @@ fn visible_segment(
 
 /// Bands for the grey-level fit from a pose: each edge's predicted segment, trimmed
 /// at the corners, limited (beam edge) to a few tip heights, clipped to the frame.
-fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64) -> [Option<Band>; 3] {
+fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64, bend0: f64) -> [Option<Band>; 3] {
     let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
     let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
     let reach = half_width(blur) + 2.5 * blur;
@@ -282,8 +282,9 @@ fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64) -> [Option<Band>;
             return None;
         }
         let dir = scale(sub(far, tip), 1.0 / full);
+        let red = &t.edges[RED];
         let len = if e == RED {
-            RED_SPAN_HEIGHTS * t.height * pose.scale
+            ((t.bend_tau - red.tip_tau).abs() + RED_SPAN_HEIGHTS * t.height) * pose.scale
         } else {
             full
         };
@@ -298,7 +299,8 @@ fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64) -> [Option<Band>;
             start: at(a),
             end: at(b),
             line,
-            bend_from: (e == RED).then(|| line.foot(tip)),
+            bend_from: (e == RED).then(|| line.foot(t.place(pose, red.point(t.bend_tau)))),
+            bend0,
         })
     })
 }
@@ -377,7 +379,7 @@ mod debug_tests {
                     apex: est.apex_px.unwrap(),
                 };
                 let size = [frame.width() as f64, frame.height() as f64];
-                let b = bands(&t, &pose, size, tr.blur);
+                let b = bands(&t, &pose, size, tr.blur, 0.0);
                 let fit = tr.refiner.fit(&frame, &b, false, tr.blur, false).unwrap();
                 print!(
                     "{name} {f} {angle:+8.3} {:5} {:8} joint {:+.3}",
@@ -420,12 +422,22 @@ mod debug_frame {
     fn explain_frame() {
         let name = std::env::var("SAMPLE").unwrap_or("mixed".into());
         let frames = std::env::var("FRAMES").unwrap_or("frame_00011.png".into());
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/samples")
-            .join(name);
+        let dir = match std::env::var("SAMPLE_DIR") {
+            Ok(d) => std::path::PathBuf::from(d),
+            Err(_) => Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data/samples")
+                .join(name),
+        };
         let cfg = Config::load(&dir.join("probe.toml")).unwrap();
-        let cal_cfg = cfg.tracker.calibration.clone().unwrap();
+        let mut cal_cfg = cfg.tracker.calibration.clone().unwrap();
         let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
+        let (w, h) = (
+            reference.width() as f64 - 1.0,
+            reference.height() as f64 - 1.0,
+        );
+        for v in [&mut cal_cfg.red, &mut cal_cfg.blue, &mut cal_cfg.green] {
+            v.retain(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h);
+        }
         let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
         let mut tr = Tracker::new(&cfg.tracker, cal, None);
         tr.set_coherence(false);

@@ -229,3 +229,71 @@ pub fn table(truth: &[Truth], est: &[Estimate]) -> String {
     }
     out
 }
+
+/// A rendered session (see `nanoforce::scene`) tracked frame by frame.
+pub mod rendered {
+    use super::Truth;
+    use image::GrayImage;
+    use nanoforce::config::{CalibrationConfig, TrackerConfig};
+    use nanoforce::scene::{render_into, Session};
+    use nanoforce::vision::{Calibration, Estimate, Tracker};
+
+    /// The tracker settings and calibration clicks the session's probe.toml would hold.
+    /// The scene's click generator can put a red click beyond the frame when the beam
+    /// leaves it steeply; a person cannot click there, so such clicks are dropped.
+    pub fn tracker_config(session: &Session) -> TrackerConfig {
+        let clicks = session.clicks();
+        let (w, h) = (
+            session.reference.width as f64,
+            session.reference.height as f64,
+        );
+        let inside = |v: Vec<[f64; 2]>| -> Vec<[f64; 2]> {
+            v.into_iter()
+                .filter(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0)
+                .collect()
+        };
+        TrackerConfig {
+            threshold: session.threshold,
+            window_deg: session.window_deg,
+            calibration: Some(CalibrationConfig {
+                reference_image: "reference.png".into(),
+                red: inside(clicks.red),
+                blue: inside(clicks.blue),
+                green: inside(clicks.green),
+            }),
+        }
+    }
+
+    pub fn calibrate(session: &Session) -> (TrackerConfig, Calibration) {
+        let cfg = tracker_config(session);
+        let mut reference = GrayImage::new(1, 1);
+        render_into(&session.reference, &mut reference);
+        let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
+            .expect("rendered reference calibrates");
+        (cfg, cal)
+    }
+
+    /// Renders and tracks every frame of `session` in order.
+    pub fn run(session: &Session, coherence: bool) -> (Vec<Truth>, Vec<Estimate>) {
+        let (cfg, cal) = calibrate(session);
+        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+        tracker.set_coherence(coherence);
+        let mut frame = GrayImage::new(1, 1);
+        let mut truths = Vec::new();
+        let mut estimates = Vec::new();
+        for (k, spec) in session.frames.iter().enumerate() {
+            let t = render_into(spec, &mut frame);
+            estimates.push(tracker.track(&frame));
+            truths.push(Truth {
+                frame: format!("frame_{k:05}"),
+                detected: t.probe_in_view,
+                angle_deg: t.angle_deg,
+                force_nn: t.force_nn,
+                tip: [t.tip_x, t.tip_y],
+                magnification: t.magnification,
+                style: spec.look.style_name.to_string(),
+            });
+        }
+        (truths, estimates)
+    }
+}

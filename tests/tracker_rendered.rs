@@ -1,0 +1,101 @@
+//! The tracker on rendered sessions with exact truth (`nanoforce::scene`).
+mod tracker_support;
+
+use tracker_support::{percentile, rendered, score, table};
+
+#[test]
+#[ignore]
+fn debug_suite() {
+    let n_sessions: usize = std::env::var("SESSIONS")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(12);
+    let per: usize = std::env::var("PER")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(50);
+    let seed: u64 = std::env::var("SEED")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(2024);
+    let sessions = nanoforce::scene::suite(seed, n_sessions, per);
+    let mut all_t = Vec::new();
+    let mut all_e = Vec::new();
+    for (i, s) in sessions.iter().enumerate() {
+        let (t, e) = rendered::run(s, false);
+        let sc = score(&t, &e);
+        println!(
+            "session {i} ({}x{}, {:?}, base {:.1}): {sc:?}",
+            s.reference.width, s.reference.height, s.reference.entry, s.reference.base_deg
+        );
+        if std::env::var("TABLE").is_ok() {
+            println!("{}", table(&t, &e));
+        }
+        all_t.extend(t);
+        all_e.extend(e);
+    }
+    println!("ALL: {:?}", score(&all_t, &all_e));
+    for style in ["clean", "clutter", "noisy", "harsh"] {
+        let idx: Vec<usize> = (0..all_t.len())
+            .filter(|&i| all_t[i].style == style)
+            .collect();
+        let t: Vec<_> = idx.iter().map(|&i| all_t[i].clone()).collect();
+        let e: Vec<_> = idx.iter().map(|&i| all_e[i]).collect();
+        println!("{style}: {:?}", score(&t, &e));
+    }
+    for (lo, hi) in [
+        (1000.0, 1500.0),
+        (1500.0, 2500.0),
+        (2500.0, 4000.0),
+        (4000.0, 8001.0),
+    ] {
+        let idx: Vec<usize> = (0..all_t.len())
+            .filter(|&i| all_t[i].magnification >= lo && all_t[i].magnification < hi)
+            .collect();
+        let t: Vec<_> = idx.iter().map(|&i| all_t[i].clone()).collect();
+        let e: Vec<_> = idx.iter().map(|&i| all_e[i]).collect();
+        println!("mag {lo}-{hi}: {:?}", score(&t, &e));
+    }
+    let mut worst: Vec<(f64, usize)> = (0..all_t.len())
+        .filter(|&i| all_t[i].detected && all_e[i].detected)
+        .map(|i| ((all_e[i].angle_deg.unwrap() - all_t[i].angle_deg).abs(), i))
+        .collect();
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for &(err, i) in worst.iter().take(15) {
+        println!(
+            "worst {err:.3} frame #{i} session {} k {} {} mag {} angle {:.2}",
+            i / per,
+            i % per,
+            all_t[i].style,
+            all_t[i].magnification,
+            all_t[i].angle_deg
+        );
+    }
+    for i in 0..all_t.len() {
+        if all_t[i].detected != all_e[i].detected {
+            println!("detection mismatch #{i} session {} k {} truth {} est {} {} mag {} angle {:.2} miss {:?} conf {:.2}", i / per, i % per, all_t[i].detected, all_e[i].detected, all_t[i].style, all_t[i].magnification, all_t[i].angle_deg, all_e[i].miss, all_e[i].confidence);
+        }
+    }
+    let _ = percentile;
+}
+
+/// Writes suite session `SESSION` to `OUT` (scene.md layout) for a closer look.
+#[test]
+#[ignore]
+fn debug_write_session() {
+    let seed: u64 = std::env::var("SEED")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(2024);
+    let n_sessions: usize = std::env::var("SESSIONS")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(12);
+    let per: usize = std::env::var("PER")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(50);
+    let i: usize = std::env::var("SESSION").unwrap().parse().unwrap();
+    let out = std::env::var("OUT").unwrap();
+    let sessions = nanoforce::scene::suite(seed, n_sessions, per);
+    sessions[i]
+        .write(
+            std::path::Path::new(&out),
+            nanoforce::scene::FrameFormat::Png,
+        )
+        .unwrap();
+}
