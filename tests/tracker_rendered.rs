@@ -91,11 +91,53 @@ fn debug_write_session() {
         .unwrap_or(50);
     let i: usize = std::env::var("SESSION").unwrap().parse().unwrap();
     let out = std::env::var("OUT").unwrap();
-    let sessions = nanoforce::scene::suite(seed, n_sessions, per);
+    let mut sessions = nanoforce::scene::suite(seed, n_sessions, per);
+    if std::env::var("BLANK").is_ok() {
+        for f in &mut sessions[i].frames {
+            f.blank = true;
+        }
+    }
     sessions[i]
         .write(
             std::path::Path::new(&out),
             nanoforce::scene::FrameFormat::Png,
         )
         .unwrap();
+}
+
+/// Many blank frames (clutter, substrate, shading, noise; no probe): false detections
+/// and the largest confidence reached.
+#[test]
+#[ignore]
+fn debug_blank() {
+    let seed: u64 = std::env::var("SEED").map(|s| s.parse().unwrap()).unwrap_or(77);
+    let n_sessions: usize = std::env::var("SESSIONS").map(|s| s.parse().unwrap()).unwrap_or(12);
+    let per: usize = std::env::var("PER").map(|s| s.parse().unwrap()).unwrap_or(50);
+    let mut sessions = nanoforce::scene::suite(seed, n_sessions, per);
+    let mut false_pos = 0;
+    let mut max_conf: f64 = 0.0;
+    let mut misses = [0usize; 4];
+    for (i, s) in sessions.iter_mut().enumerate() {
+        for f in &mut s.frames {
+            f.blank = true;
+        }
+        let (t, e) = rendered::run(s, false);
+        for (k, (_, est)) in t.iter().zip(&e).enumerate() {
+            max_conf = max_conf.max(est.confidence);
+            if est.confidence > 0.25 {
+                println!("NEAR session {i} frame {k}: conf {:.3} {:?}", est.confidence, est.miss);
+            }
+            if est.detected {
+                false_pos += 1;
+                println!("FALSE session {i} frame {k}: {est:?}");
+            }
+            match est.miss {
+                Some(nanoforce::vision::Miss::NoCandidates) => misses[0] += 1,
+                Some(nanoforce::vision::Miss::Inconsistent) => misses[1] += 1,
+                Some(nanoforce::vision::Miss::LowConfidence) => misses[2] += 1,
+                None => misses[3] += 1,
+            }
+        }
+    }
+    println!("blank frames {}: false {false_pos}, max confidence {max_conf:.3}, misses (none/inconsistent/low/none) {misses:?}", n_sessions * per);
 }

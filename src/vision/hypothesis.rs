@@ -19,8 +19,9 @@ use super::template::{Pose, Template, RED};
 /// Scale range searched, detection pixels per reference pixel (before binning).
 const SCALE_MIN: f64 = 0.05;
 const SCALE_MAX: f64 = 12.0;
-/// Log step of the scale scan for pairs.
+/// Log step of the scale scan for pairs, and the most steps from SCALE_MIN to SCALE_MAX.
 const SCALE_STEP: f64 = 1.03;
+const SCALE_STEPS_MAX: usize = 192;
 /// Smallest tip (apex to red line), detection pixels.
 const MIN_HEIGHT_PX: f64 = 10.0;
 /// Hypotheses kept for the full (walking) evaluation.
@@ -70,7 +71,24 @@ pub struct Hypothesis {
     pub members: [Option<usize>; 3],
     pub coverage: [Coverage; 3],
     pub score: f64,
+    /// For a pair: the scales that explain the pair equally well (the apex moves along
+    /// `apex0 + scale * apex1`); the edge left out decides among them.
+    pub plateau: Option<Plateau>,
 }
+
+/// Scales over which a pair hypothesis scores the same.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plateau {
+    pub apex0: [f64; 2],
+    pub apex1: [f64; 2],
+    pub scale_lo: f64,
+    pub scale_hi: f64,
+}
+
+/// Scales tried along a plateau when placing the edge a pair leaves out.
+const PLATEAU_STEPS: usize = 10;
+/// Scores within this of the best belong to its plateau.
+const PLATEAU_TOL: f64 = 1.0;
 
 /// Reusable state of the search.
 #[derive(Debug, Default)]
@@ -114,12 +132,7 @@ impl Search {
         }
         let mut best: Option<Hypothesis> = None;
         for h in &mut self.shortlist {
-            for e in 0..3 {
-                if h.members[e].is_none() {
-                    h.coverage[e] = walk(template, &h.pose, e, edges);
-                }
-            }
-            h.score = h.coverage.iter().map(Coverage::score).sum();
+            place_missing(template, h, edges);
             if best.is_none_or(|b| h.score > b.score) {
                 best = Some(*h);
             }
@@ -172,17 +185,18 @@ impl Search {
         let best = if idx.len() == 3 {
             solve3(&rows).and_then(|(apex, scale)| {
                 let pose = Pose { psi, scale, apex };
-                partial(&pose).map(|(cov, s)| (pose, cov, s))
+                partial(&pose).map(|(cov, s)| (pose, cov, s, None))
             })
         } else {
             scan_scale(&rows[..2], psi, partial)
         };
-        if let Some((pose, coverage, score)) = best {
+        if let Some((pose, coverage, score, plateau)) = best {
             self.shortlist_insert(Hypothesis {
                 pose,
                 members,
                 coverage,
                 score,
+                plateau,
             });
         }
     }
@@ -275,7 +289,7 @@ fn scan_scale(
     r: &[LineRow],
     psi: f64,
     score: impl Fn(&Pose) -> Option<([Coverage; 3], f64)>,
-) -> Option<(Pose, [Coverage; 3], f64)> {
+) -> Option<(Pose, [Coverage; 3], f64, Option<Plateau>)> {
     let det = r[0].normal[0] * r[1].normal[1] - r[0].normal[1] * r[1].normal[0];
     if det.abs() < 0.05 {
         return None;
@@ -289,18 +303,74 @@ fn scan_scale(
     let a0 = solve(r[0].rho, r[1].rho);
     let a1 = solve(-r[0].offset, -r[1].offset);
     let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
-    let mut scale = SCALE_MIN;
-    while scale <= SCALE_MAX {
+    let mut scores = [f64::NEG_INFINITY; SCALE_STEPS_MAX];
+    let mut best_k = 0;
+    for (k, slot) in scores.iter_mut().enumerate() {
+        let scale = SCALE_MIN * SCALE_STEP.powi(k as i32);
+        if scale > SCALE_MAX {
+            break;
+        }
         let apex = [a0[0] + scale * a1[0], a0[1] + scale * a1[1]];
         let pose = Pose { psi, scale, apex };
         if let Some((cov, s)) = score(&pose) {
+            *slot = s;
             if best.as_ref().is_none_or(|b| s > b.2 + 1e-9) {
                 best = Some((pose, cov, s));
+                best_k = k;
             }
         }
-        scale *= SCALE_STEP;
     }
-    best
+    let (pose, cov, s) = best?;
+    let (mut lo, mut hi) = (best_k, best_k);
+    while lo > 0 && scores[lo - 1] >= s - PLATEAU_TOL {
+        lo -= 1;
+    }
+    while hi + 1 < SCALE_STEPS_MAX && scores[hi + 1] >= s - PLATEAU_TOL {
+        hi += 1;
+    }
+    let plateau = Plateau {
+        apex0: a0,
+        apex1: a1,
+        scale_lo: SCALE_MIN * SCALE_STEP.powi(lo as i32),
+        scale_hi: SCALE_MIN * SCALE_STEP.powi(hi as i32),
+    };
+    Some((pose, cov, s, Some(plateau)))
+}
+
+/// Scores the edges a hypothesis left out where it puts them (directly on the edge
+/// map), choosing for a pair the scale along its plateau that explains them best.
+fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
+    let missing = |h: &Hypothesis, pose: &Pose| -> [Option<Coverage>; 3] {
+        std::array::from_fn(|e| h.members[e].is_none().then(|| walk(t, pose, e, edges)))
+    };
+    let total = |h: &Hypothesis, cov: &[Option<Coverage>; 3]| -> f64 {
+        (0..3)
+            .map(|e| cov[e].unwrap_or(h.coverage[e]).score())
+            .sum()
+    };
+    let mut best_pose = h.pose;
+    let mut best_cov = missing(h, &h.pose);
+    let mut best = total(h, &best_cov);
+    if let Some(p) = h.plateau {
+        let ratio = (p.scale_hi / p.scale_lo).max(1.0);
+        for k in 0..=PLATEAU_STEPS {
+            let scale = p.scale_lo * ratio.powf(k as f64 / PLATEAU_STEPS as f64);
+            let apex = [p.apex0[0] + scale * p.apex1[0], p.apex0[1] + scale * p.apex1[1]];
+            let pose = Pose { scale, apex, ..h.pose };
+            let cov = missing(h, &pose);
+            let s = total(h, &cov);
+            if s > best + 1e-9 {
+                (best, best_pose, best_cov) = (s, pose, cov);
+            }
+        }
+    }
+    h.pose = best_pose;
+    for e in 0..3 {
+        if let Some(c) = best_cov[e] {
+            h.coverage[e] = c;
+        }
+    }
+    h.score = best;
 }
 
 /// Whether a pose could be a tip in this image: big enough to see, and with its apex

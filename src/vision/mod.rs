@@ -31,6 +31,7 @@ mod pyramid;
 mod refine;
 mod template;
 mod tracker;
+mod verify;
 
 use std::fmt;
 

@@ -18,7 +18,8 @@ use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
-use super::{EdgeFit, Estimate, Miss};
+use super::verify::{self, Evidence, MIN_CONFIDENCE};
+use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::config::{Threshold, TrackerConfig};
 use crate::model::Cantilever;
 
@@ -27,10 +28,10 @@ const COHERENT_TOL_RAD: f64 = 0.07;
 /// How much of the beam edge (in tip heights from the free end) is fitted: all of it
 /// that is in view, in practice; the bend term takes care of its curvature.
 const RED_SPAN_HEIGHTS: f64 = 4.0;
+/// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
+const CONFIRMED_FRACTION: f64 = 0.5;
 /// Shortest band worth fitting, frame pixels.
 const MIN_BAND_PX: f64 = 10.0;
-/// Smallest confidence reported as a detection.
-const MIN_CONFIDENCE: f64 = 0.5;
 
 /// The last confident estimate, for coherence.
 #[derive(Debug, Clone, Copy)]
@@ -165,37 +166,70 @@ impl Tracker {
             apex: self.pyr.to_frame(hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
-        let first = bands(t, &pose, size, self.blur, 0.0);
+        // Fit the edges the search found: its lines, and a left-out edge only where the
+        // edge map confirms it (a pair leaves the scale, hence that edge, uncertain).
+        let confirmed: [bool; 3] = std::array::from_fn(|e| {
+            hyp.members[e].is_some() || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
+        });
+        let keep = |b: [Option<Band>; 3]| -> [Option<Band>; 3] {
+            std::array::from_fn(|e| b[e].filter(|_| confirmed[e]))
+        };
+        let first = keep(bands(t, &pose, size, self.blur, 0.0));
         let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
         // Second pass on bands placed from the refined lines.
         let pose = refined_pose(t, &pose, &fit);
-        let bands = bands(t, &pose, size, self.blur, fit.bend);
+        let bands = keep(bands(t, &pose, size, self.blur, fit.bend));
         let fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         let pose = refined_pose(t, &pose, &fit);
-        Some(self.verdict(t, &hyp, &pose, &fit, &bands, size))
+        Some(self.verdict(frame, t, &hyp, &pose, &fit, &bands))
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn verdict(
         &mut self,
+        frame: &GrayImage,
         t: &Template,
         hyp: &Hypothesis,
         pose: &Pose,
         fit: &FitResult,
         bands: &[Option<Band>; 3],
-        size: [f64; 2],
     ) -> Estimate {
+        let size = [frame.width() as f64, frame.height() as f64];
+        let in_view = bands.map(|b| b.is_some());
+        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let (sup, vis) = hyp
+            .coverage
+            .iter()
+            .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
+        let margin = half_width(fit.blur);
+        let interior = verify::interior_median(frame, t, pose, margin)
+            .map_or(0.0, |m| verify::interior_position(fit, m));
+        let evidence = Evidence {
+            coverage: if vis > 0.0 { sup / vis } else { 0.0 },
+            contrast_ratio: verify::contrast_ratio(fit, &in_view, &calibrated),
+            interior,
+            turn_sigma_deg: fit.turn_sigma.to_degrees(),
+        };
+        let confidence = evidence.confidence();
+        if std::env::var("NF_DEBUG").is_ok() {
+            eprintln!("verdict: {evidence:?} -> {confidence:.3}");
+            if evidence.contrast_ratio < 0.3 {
+                eprintln!("   LOWC hyp members {:?} plateau {:?} scale {:.3} cov {:?}", hyp.members, hyp.plateau, hyp.pose.scale, hyp.coverage);
+                for e in 0..3 {
+                    if let (Some(r), Some(b)) = (fit.edges[e], bands[e]) {
+                        eprintln!("   LOWC e{e} contrast {:.1} (cal {:.1}) samples {} noise {:.1} band {:.0},{:.0}->{:.0},{:.0}", r.contrast, calibrated[e], r.samples, r.noise, b.start[0], b.start[1], b.end[0], b.end[1]);
+                    }
+                }
+            }
+        }
+        if confidence < MIN_CONFIDENCE {
+            return Estimate::missed(Miss::LowConfidence, confidence);
+        }
         let mut edges = [None; 3];
-        let mut strong = 0;
-        let mut snr_min = f64::INFINITY;
         for e in 0..3 {
-            let (Some(r), Some(_)) = (fit.edges[e], bands[e]) else {
+            let (Some(r), true) = (fit.edges[e], in_view[e]) else {
                 continue;
             };
-            let snr = r.contrast / r.noise;
-            if r.contrast > 8.0 && snr > 0.8 {
-                strong += 1;
-                snr_min = snr_min.min(snr);
-            }
             let (a, b) = visible_segment(t, pose, e, size).unwrap_or((pose.apex, pose.apex));
             edges[e] = Some(EdgeFit {
                 start_px: r.line.foot(a),
@@ -203,25 +237,6 @@ impl Tracker {
                 support: hyp.coverage[e].supported as u32,
                 contrast: r.contrast,
             });
-        }
-        let (sup, vis) = hyp
-            .coverage
-            .iter()
-            .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
-        let coverage = if vis > 0.0 { sup / vis } else { 0.0 };
-        let precision = (-(fit.turn_sigma.to_degrees() / 0.3)).exp();
-        let confidence = (coverage * precision * (snr_min / 2.0).min(1.0)).clamp(0.0, 1.0);
-        if std::env::var("NF_DEBUG").is_ok() {
-            eprintln!("verdict: coverage {coverage:.3} turn_sigma {:.3} deg snr_min {snr_min:.2} strong {strong}", fit.turn_sigma.to_degrees());
-            for r in fit.edges.iter().flatten() {
-                eprintln!(
-                    "   contrast {:.1} noise {:.1} samples {} level {:.1}",
-                    r.contrast, r.noise, r.samples, r.level
-                );
-            }
-        }
-        if strong < 2 || confidence < MIN_CONFIDENCE {
-            return Estimate::missed(Miss::LowConfidence, confidence);
         }
         self.blur = fit.blur.clamp(0.5, 3.0);
         let angle_deg = screen_deg_from_image_rad(pose.psi);
