@@ -110,9 +110,15 @@ fn debug_write_session() {
 #[test]
 #[ignore]
 fn debug_blank() {
-    let seed: u64 = std::env::var("SEED").map(|s| s.parse().unwrap()).unwrap_or(77);
-    let n_sessions: usize = std::env::var("SESSIONS").map(|s| s.parse().unwrap()).unwrap_or(12);
-    let per: usize = std::env::var("PER").map(|s| s.parse().unwrap()).unwrap_or(50);
+    let seed: u64 = std::env::var("SEED")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(77);
+    let n_sessions: usize = std::env::var("SESSIONS")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(12);
+    let per: usize = std::env::var("PER")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(50);
     let mut sessions = nanoforce::scene::suite(seed, n_sessions, per);
     let mut false_pos = 0;
     let mut max_conf: f64 = 0.0;
@@ -125,7 +131,10 @@ fn debug_blank() {
         for (k, (_, est)) in t.iter().zip(&e).enumerate() {
             max_conf = max_conf.max(est.confidence);
             if est.confidence > 0.25 {
-                println!("NEAR session {i} frame {k}: conf {:.3} {:?}", est.confidence, est.miss);
+                println!(
+                    "NEAR session {i} frame {k}: conf {:.3} {:?}",
+                    est.confidence, est.miss
+                );
             }
             if est.detected {
                 false_pos += 1;
@@ -140,4 +149,62 @@ fn debug_blank() {
         }
     }
     println!("blank frames {}: false {false_pos}, max confidence {max_conf:.3}, misses (none/inconsistent/low/none) {misses:?}", n_sessions * per);
+}
+
+/// Truth edges of suite frame SESSION/FRAME.
+#[test]
+#[ignore]
+fn debug_truth_edges() {
+    let seed: u64 = std::env::var("SEED")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(2024);
+    let i: usize = std::env::var("SESSION").unwrap().parse().unwrap();
+    let k: usize = std::env::var("FRAME").unwrap().parse().unwrap();
+    let sessions = nanoforce::scene::suite(seed, 12, 50);
+    let (_, t) = nanoforce::scene::render(&sessions[i].frames[k]);
+    let (_, r) = nanoforce::scene::render(&sessions[i].reference);
+    let (e, re) = (t.edges.unwrap(), r.edges.unwrap());
+    for (name, s, rs) in [
+        ("red", e.red, re.red),
+        ("blue", e.blue, re.blue),
+        ("green", e.green, re.green),
+    ] {
+        println!(
+            "{name}: frame {:?} angle {:.4} | reference angle {:.4} | diff {:.4}",
+            s,
+            s.angle_deg(),
+            rs.angle_deg(),
+            s.angle_deg() - rs.angle_deg()
+        );
+    }
+    println!(
+        "truth angle {:.4} probe {:?}",
+        t.angle_deg,
+        sessions[i].probe()
+    );
+}
+
+/// A short cantilever at low magnification and large angles: a strongly bent beam.
+#[test]
+#[ignore]
+fn debug_short_beam() {
+    use nanoforce::scene::{Entry, Session, Setup, Style};
+    for (entry, base) in [(Entry::Left, -10.0), (Entry::Right, 15.0)] {
+        let mut setup = Setup::random(5, 640, 480);
+        setup.probe.length_um = 100.0;
+        setup.entry = entry;
+        setup.base_deg = base;
+        let mut session = Session::mixed_for(&setup, 3, 8);
+        for (k, f) in session.frames.iter_mut().enumerate() {
+            *f = setup.frame(
+                Style::Clean,
+                if k % 2 == 0 { 20.0 } else { -20.0 },
+                1000.0 + 250.0 * (k / 2) as f64,
+                40 + k as u64,
+            );
+            f.apex_px = [320.0, 240.0];
+        }
+        let (t, e) = rendered::run(&session, false);
+        println!("{}", table(&t, &e));
+    }
 }

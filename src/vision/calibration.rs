@@ -376,6 +376,7 @@ fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
         line: loc.line,
         bend_from: None,
         bend0: 0.0,
+        bend_sigma: f64::INFINITY,
     }
 }
 

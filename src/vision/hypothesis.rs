@@ -355,8 +355,15 @@ fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
         let ratio = (p.scale_hi / p.scale_lo).max(1.0);
         for k in 0..=PLATEAU_STEPS {
             let scale = p.scale_lo * ratio.powf(k as f64 / PLATEAU_STEPS as f64);
-            let apex = [p.apex0[0] + scale * p.apex1[0], p.apex0[1] + scale * p.apex1[1]];
-            let pose = Pose { scale, apex, ..h.pose };
+            let apex = [
+                p.apex0[0] + scale * p.apex1[0],
+                p.apex0[1] + scale * p.apex1[1],
+            ];
+            let pose = Pose {
+                scale,
+                apex,
+                ..h.pose
+            };
             let cov = missing(h, &pose);
             let s = total(h, &cov);
             if s > best + 1e-9 {

@@ -51,9 +51,11 @@ pub struct Band {
     /// For the beam edge: where the beam starts to bend (the back of the rigid block),
     /// from which the cubic bend grows into the band.
     pub bend_from: Option<[f64; 2]>,
-    /// Starting bend: offset (pixels, along the inward normal) at [`BEND_UNIT_PX`] from
-    /// `bend_from`; the band follows the bent edge.
+    /// Expected bend: offset (pixels, along the inward normal) at [`BEND_UNIT_PX`] from
+    /// `bend_from`; the band follows the bent edge, and the fit starts from it.
     pub bend0: f64,
+    /// Standard deviation of the prior on the bend around `bend0` (infinite: no prior).
+    pub bend_sigma: f64,
 }
 
 /// The band that may carry a bend (the beam edge).
@@ -202,7 +204,15 @@ impl Refiner {
             iterations += 1;
             // The first iterations, far from the solution, on every other pixel.
             let step = if iter < SUBSAMPLED_ITERATIONS { 2 } else { 1 };
-            let ne = self.normal_equations(&frames, &x, &noise, shared, step);
+            let mut ne = self.normal_equations(&frames, &x, &noise, shared, step);
+            if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
+                // The physics' expectation of the bend as one more observation, weighted
+                // like the pixels (whose sums the normal equations hold).
+                let n2 = ne.noise[RED_BAND].min(1e6).powi(2);
+                let weight = n2 / (b.bend_sigma * b.bend_sigma * step as f64);
+                ne.h[P_BEND][P_BEND] += weight;
+                ne.g[P_BEND] += weight * (b.bend0 - x[P_BEND]);
+            }
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
@@ -848,6 +858,7 @@ mod tests {
             line,
             bend_from: None,
             bend0: 0.0,
+            bend_sigma: f64::INFINITY,
         };
         let mut r = Refiner::default();
         let fit = r
@@ -910,6 +921,7 @@ mod debug_refine {
             line,
             bend_from: None,
             bend0: 0.0,
+            bend_sigma: f64::INFINITY,
         };
         let mut r = Refiner::default();
         let fit = r

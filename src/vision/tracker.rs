@@ -12,22 +12,37 @@ use image::GrayImage;
 use super::calibration::Calibration;
 use super::candidates::Candidates;
 use super::edges::EdgeMap;
-use super::geometry::{add, clip_to_rect, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
+use super::geometry::{
+    add, along, clip_to_rect, dot, norm, scale, screen_deg_from_image_rad, sub, Line,
+};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
-use super::refine::{half_width, Band, FitResult, Refiner};
+use super::refine::{half_width, Band, FitResult, Refiner, BEND_UNIT_PX};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::config::{Threshold, TrackerConfig};
-use crate::model::Cantilever;
+use crate::model::{Cantilever, ModelTable};
 
 /// How far the coherent search looks around the last rotation, radians.
 const COHERENT_TOL_RAD: f64 = 0.07;
 /// How much of the beam edge (in tip heights from the free end) is fitted: all of it
 /// that is in view, in practice; the bend term takes care of its curvature.
 const RED_SPAN_HEIGHTS: f64 = 4.0;
+/// Typical distance from the apex to the beam's upper face, micrometres (scene.md:
+/// pyramid 9-16 um plus beam 1.5-4 um).
+const TIP_HEIGHT_UM: f64 = 14.5;
+
+/// The beam edge's expected bend (offset at [`BEND_UNIT_PX`] beyond the rigid block,
+/// pixels) from the exact elastica at the current angle, and its uncertainty (mostly
+/// the unknown pixel size of the reference).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BendPrior {
+    mean: f64,
+    sigma: f64,
+}
+
 /// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
 const CONFIRMED_FRACTION: f64 = 0.5;
 /// Shortest band worth fitting, frame pixels.
@@ -174,14 +189,72 @@ impl Tracker {
         let keep = |b: [Option<Band>; 3]| -> [Option<Band>; 3] {
             std::array::from_fn(|e| b[e].filter(|_| confirmed[e]))
         };
-        let first = keep(bands(t, &pose, size, self.blur, 0.0));
+        let prior = self.bend_prior(t, &pose, 0.0);
+        let first = keep(bands(t, &pose, size, self.blur, prior));
         let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
         // Second pass on bands placed from the refined lines.
         let pose = refined_pose(t, &pose, &fit);
-        let bands = keep(bands(t, &pose, size, self.blur, fit.bend));
+        let prior = self.bend_prior(t, &pose, fit.bend);
+        let bands = keep(bands(t, &pose, size, self.blur, prior));
         let fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+        if std::env::var("NF_BEND").is_ok() && bands[RED].is_some() {
+            let physics = {
+                let saved = std::env::var("NF_NOPRIOR").ok();
+                let _ = saved;
+                let length_px = self
+                    .cantilever
+                    .map_or(0.0, |c| c.length_um * t.height * pose.scale / TIP_HEIGHT_UM);
+                let alpha = ModelTable::global().alpha_rad(pose.psi.abs()).value;
+                let red = &t.edges[RED];
+                let towards_clamp = scale(along(red.normal), (red.far_tau - red.tip_tau).signum());
+                let handed = dot([-towards_clamp[1], towards_clamp[0]], red.normal);
+                -pose.psi.signum() * alpha * pose.psi.cos() * BEND_UNIT_PX.powi(3)
+                    / (6.0 * length_px * length_px)
+                    * handed
+            };
+            eprintln!(
+                "BEND angle {:+.2} fitted {:+.4} physics {:+.4} band len {:.0}",
+                -pose.psi.to_degrees(),
+                fit.bend,
+                physics,
+                bands[RED].map_or(0.0, |b| norm(sub(b.end, b.start)))
+            );
+        }
         let pose = refined_pose(t, &pose, &fit);
         Some(self.verdict(frame, t, &hyp, &pose, &fit, &bands))
+    }
+
+    /// What the elastica says the beam's bend should be (see [`BendPrior`]); without a
+    /// cantilever, no prior (the band then follows `fitted`).
+    fn bend_prior(&self, t: &Template, pose: &Pose, fitted: f64) -> BendPrior {
+        let Some(cantilever) = self.cantilever else {
+            return BendPrior {
+                mean: fitted,
+                sigma: f64::INFINITY,
+            };
+        };
+        // Pixels per micrometre from the tip's size: apex to beam face is the pyramid
+        // (9-16 um) plus the beam (1.5-4 um), 14.5 um give or take a factor 1.38.
+        let px_per_um = t.height * pose.scale / TIP_HEIGHT_UM;
+        let length_px = cantilever.length_um * px_per_um;
+        let angle = pose.psi.abs();
+        let alpha = ModelTable::global().alpha_rad(angle).value;
+        let red = &t.edges[RED];
+        let towards_clamp = scale(along(red.normal), (red.far_tau - red.tip_tau).signum());
+        let handed = dot([-towards_clamp[1], towards_clamp[0]], red.normal);
+        let unit3 = BEND_UNIT_PX.powi(3);
+        let mean = -pose.psi.signum() * alpha * angle.cos() * unit3 / (6.0 * length_px * length_px)
+            * handed;
+        if std::env::var("NF_NOPRIOR").is_ok() {
+            return BendPrior {
+                mean: fitted,
+                sigma: f64::INFINITY,
+            };
+        }
+        BendPrior {
+            mean,
+            sigma: 0.7 * mean.abs() + 0.03,
+        }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -214,7 +287,10 @@ impl Tracker {
         if std::env::var("NF_DEBUG").is_ok() {
             eprintln!("verdict: {evidence:?} -> {confidence:.3}");
             if evidence.contrast_ratio < 0.3 {
-                eprintln!("   LOWC hyp members {:?} plateau {:?} scale {:.3} cov {:?}", hyp.members, hyp.plateau, hyp.pose.scale, hyp.coverage);
+                eprintln!(
+                    "   LOWC hyp members {:?} plateau {:?} scale {:.3} cov {:?}",
+                    hyp.members, hyp.plateau, hyp.pose.scale, hyp.coverage
+                );
                 for e in 0..3 {
                     if let (Some(r), Some(b)) = (fit.edges[e], bands[e]) {
                         eprintln!("   LOWC e{e} contrast {:.1} (cal {:.1}) samples {} noise {:.1} band {:.0},{:.0}->{:.0},{:.0}", r.contrast, calibrated[e], r.samples, r.noise, b.start[0], b.start[1], b.end[0], b.end[1]);
@@ -280,7 +356,13 @@ fn visible_segment(
 
 /// Bands for the grey-level fit from a pose: each edge's predicted segment, trimmed
 /// at the corners, limited (beam edge) to a few tip heights, clipped to the frame.
-fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64, bend0: f64) -> [Option<Band>; 3] {
+fn bands(
+    t: &Template,
+    pose: &Pose,
+    size: [f64; 2],
+    blur: f64,
+    bend: BendPrior,
+) -> [Option<Band>; 3] {
     let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
     let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
     let reach = half_width(blur) + 2.5 * blur;
@@ -315,7 +397,8 @@ fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64, bend0: f64) -> [O
             end: at(b),
             line,
             bend_from: (e == RED).then(|| line.foot(t.place(pose, red.point(t.bend_tau)))),
-            bend0,
+            bend0: bend.mean,
+            bend_sigma: bend.sigma,
         })
     })
 }
@@ -365,13 +448,30 @@ mod debug_tests {
     #[test]
     #[ignore]
     fn per_edge_turns_on_samples() {
-        for name in ["mixed", "sequence"] {
-            let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data/samples")
-                .join(name);
+        let dirs: Vec<std::path::PathBuf> = match std::env::var("SAMPLE_DIR") {
+            Ok(d) => vec![d.into()],
+            Err(_) => ["mixed", "sequence"]
+                .iter()
+                .map(|n| {
+                    Path::new(env!("CARGO_MANIFEST_DIR"))
+                        .join("tests/data/samples")
+                        .join(n)
+                })
+                .collect(),
+        };
+        let only = std::env::var("FRAMES").ok();
+        for dir in dirs {
+            let name = dir.file_name().unwrap().to_string_lossy().to_string();
             let cfg = Config::load(&dir.join("probe.toml")).unwrap();
-            let cal_cfg = cfg.tracker.calibration.clone().unwrap();
+            let mut cal_cfg = cfg.tracker.calibration.clone().unwrap();
             let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
+            let (w, h) = (
+                reference.width() as f64 - 1.0,
+                reference.height() as f64 - 1.0,
+            );
+            for v in [&mut cal_cfg.red, &mut cal_cfg.blue, &mut cal_cfg.green] {
+                v.retain(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h);
+            }
             let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
             let mut tr = Tracker::new(&cfg.tracker, cal, None);
             tr.set_coherence(false);
@@ -379,6 +479,9 @@ mod debug_tests {
             for line in truth.lines().skip(1) {
                 let v: Vec<&str> = line.split(',').collect();
                 let f = v[0];
+                if only.as_ref().is_some_and(|o| !o.split(',').any(|x| x == f)) || v[1] == "0" {
+                    continue;
+                }
                 let angle: f64 = v[2].parse().unwrap();
                 let frame = image::open(dir.join("frames").join(f)).unwrap().to_luma8();
                 let est = tr.track(&frame);
@@ -394,7 +497,16 @@ mod debug_tests {
                     apex: est.apex_px.unwrap(),
                 };
                 let size = [frame.width() as f64, frame.height() as f64];
-                let b = bands(&t, &pose, size, tr.blur, 0.0);
+                let b = bands(
+                    &t,
+                    &pose,
+                    size,
+                    tr.blur,
+                    BendPrior {
+                        mean: 0.0,
+                        sigma: f64::INFINITY,
+                    },
+                );
                 let fit = tr.refiner.fit(&frame, &b, false, tr.blur, false).unwrap();
                 print!(
                     "{name} {f} {angle:+8.3} {:5} {:8} joint {:+.3}",

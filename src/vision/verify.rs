@@ -44,7 +44,7 @@ impl Evidence {
     /// The combined confidence in [0, 1].
     pub fn confidence(&self) -> f64 {
         let ramp = |x: f64, lo: f64, hi: f64| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
-        let coverage = ramp(self.coverage, 0.5, 0.85);
+        let coverage = ramp(self.coverage, 0.4, 0.75);
         let contrast = ramp(self.contrast_ratio, MIN_CONTRAST_RATIO, 0.45);
         let interior = ramp(self.interior, 0.4, 0.75);
         let precision = (-self.turn_sigma_deg / 0.3).exp();
@@ -92,9 +92,17 @@ pub fn interior_median(frame: &GrayImage, t: &Template, pose: &Pose, margin: f64
     let xs = [apex[0], base_b[0], base_g[0]];
     let ys = [apex[1], base_b[1], base_g[1]];
     let x0 = xs.iter().copied().fold(f64::INFINITY, f64::min).max(1.0);
-    let x1 = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max).min(w - 2.0);
+    let x1 = xs
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .min(w - 2.0);
     let y0 = ys.iter().copied().fold(f64::INFINITY, f64::min).max(1.0);
-    let y1 = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max).min(h - 2.0);
+    let y1 = ys
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .min(h - 2.0);
     if x1 <= x0 || y1 <= y0 {
         return None;
     }
@@ -158,10 +166,22 @@ mod tests {
         };
         assert!(good.confidence() > 0.9);
         for bad in [
-            Evidence { coverage: 0.5, ..good },
-            Evidence { contrast_ratio: 0.15, ..good },
-            Evidence { interior: 0.2, ..good },
-            Evidence { turn_sigma_deg: 1.0, ..good },
+            Evidence {
+                coverage: 0.5,
+                ..good
+            },
+            Evidence {
+                contrast_ratio: 0.15,
+                ..good
+            },
+            Evidence {
+                interior: 0.2,
+                ..good
+            },
+            Evidence {
+                turn_sigma_deg: 1.0,
+                ..good
+            },
         ] {
             assert!(bad.confidence() < MIN_CONFIDENCE, "{bad:?}");
         }
