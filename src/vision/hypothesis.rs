@@ -372,9 +372,9 @@ fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
         }
     }
     h.pose = best_pose;
-    for e in 0..3 {
-        if let Some(c) = best_cov[e] {
-            h.coverage[e] = c;
+    for (cov, found) in h.coverage.iter_mut().zip(best_cov) {
+        if let Some(c) = found {
+            *cov = c;
         }
     }
     h.score = best;

@@ -8,6 +8,7 @@
 //! - the pyramid between the edges must be bright: the probe is a filled body, while
 //!   two crossing scratches or a substrate corner bound nothing;
 //! - the fitted rotation must be precise (its standard error from the fit).
+//!
 //! The confidence multiplies a score in [0, 1] for each; `detected` needs it above
 //! [`MIN_CONFIDENCE`].
 
