@@ -32,6 +32,8 @@ const MIN_MEMBER_FRACTION: f64 = 0.4;
 /// Red is scored only this many tip heights beyond the start of the beam's bend: further
 /// back the beam may curve away from the tip's tangent.
 const RED_SCORE_HEIGHTS: f64 = 1.5;
+/// Weight of the beam edge's coverage in a hypothesis' score (see [`edge_score`]).
+const RED_WEIGHT: f64 = 0.5;
 /// Gradient tolerance when walking a predicted edge, radians.
 const WALK_ANGLE_RAD: f64 = 0.25;
 
@@ -43,9 +45,6 @@ pub struct Coverage {
     pub visible: f64,
     /// Supported length just past the corner end (should be none).
     pub overshoot: f64,
-    /// Supported length past an open far end (the beam going on towards its clamp
-    /// beyond what the reference showed): evidence, but its absence is no penalty.
-    pub beyond: f64,
 }
 
 impl Coverage {
@@ -57,9 +56,25 @@ impl Coverage {
         }
     }
 
+    /// Supported minus unsupported length, minus twice any overshoot: the log-likelihood
+    /// ratio of "tip edge" against "background" for equally reliable edge pixels.
     fn score(&self) -> f64 {
-        2.0 * self.supported - self.visible - 2.0 * self.overshoot + self.beyond
+        2.0 * self.supported - self.visible - 2.0 * self.overshoot
     }
+}
+
+/// An edge's share of a hypothesis' score. The beam edge counts half: it is a long line
+/// whatever the hypothesis, so its length says little about where the tip is.
+fn edge_score(e: usize, c: &Coverage) -> f64 {
+    if e == RED {
+        RED_WEIGHT * c.score()
+    } else {
+        c.score()
+    }
+}
+
+fn total_score(cov: &[Coverage; 3]) -> f64 {
+    (0..3).map(|e| edge_score(e, &cov[e])).sum()
 }
 
 /// A placed tip and its evidence.
@@ -176,7 +191,7 @@ impl Search {
                     }
                 }
             }
-            Some((cov, cov.iter().map(Coverage::score).sum()))
+            Some((cov, total_score(&cov)))
         };
         let mut rows = [LineRow::default(); 3];
         for (r, &i) in rows.iter_mut().zip(idx) {
@@ -190,6 +205,17 @@ impl Search {
         } else {
             scan_scale(&rows[..2], psi, partial)
         };
+        if std::env::var("NF_CONSIDER").is_ok() {
+            eprintln!(
+                "consider {idx:?} psi {:.2}: {:?}",
+                -psi.to_degrees(),
+                best.map(|b| (
+                    b.0.scale,
+                    b.1.map(|c| (c.supported.round(), c.visible.round())),
+                    b.2
+                ))
+            );
+        }
         if let Some((pose, coverage, score, plateau)) = best {
             self.shortlist_insert(Hypothesis {
                 pose,
@@ -345,7 +371,7 @@ fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
     };
     let total = |h: &Hypothesis, cov: &[Option<Coverage>; 3]| -> f64 {
         (0..3)
-            .map(|e| cov[e].unwrap_or(h.coverage[e]).score())
+            .map(|e| edge_score(e, &cov[e].unwrap_or(h.coverage[e])))
             .sum()
     };
     let mut best_pose = h.pose;
@@ -408,7 +434,6 @@ fn segment(t: &Template, pose: &Pose, e: usize) -> ([f64; 2], [f64; 2]) {
 
 /// Coverage of edge `e`'s predicted segment by candidate `c`'s profile.
 fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate) -> Coverage {
-    let edge = &t.edges[e];
     let (tip, far) = segment(t, pose, e);
     let length = norm(sub(far, tip));
     let t_tip = Candidates::t_of(c, tip);
@@ -418,18 +443,10 @@ fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate)
     let (supported, visible) = cands.support(c, t_tip + dir * m, t_far - dir * m);
     let zone = 0.3 * length + 2.0;
     let (overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
-    // Capped by the visible part: the beam alone, without its tip in view, is no tip.
-    let beyond = if edge.far_open {
-        let (b, _) = cands.support(c, t_far - dir * m, t_far + dir * 2.0 * length);
-        b.min(visible)
-    } else {
-        0.0
-    };
     Coverage {
         supported,
         visible,
         overshoot,
-        beyond,
     }
 }
 

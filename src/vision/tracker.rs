@@ -43,6 +43,13 @@ struct BendPrior {
     sigma: f64,
 }
 
+/// An edge fitted at less than this share of its calibrated contrast is left out of the
+/// final fit when two others hold (a particle or scratch sitting on it).
+const DROP_CONTRAST_RATIO: f64 = 0.4;
+
+/// Per-edge flags.
+type Vec3Mask = [bool; 3];
+
 /// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
 const CONFIRMED_FRACTION: f64 = 0.5;
 /// Shortest band worth fitting, frame pixels.
@@ -161,7 +168,7 @@ impl Tracker {
         prior: Option<Prior>,
     ) -> Option<Estimate> {
         if self.cands.list.len() < 2 {
-            return None;
+            return Some(Estimate::missed(Miss::NoCandidates, 0.0));
         }
         let Some(hyp) = self.search.run(t, &self.cands, &self.edges, prior) else {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
@@ -174,6 +181,22 @@ impl Tracker {
         if found < 2 || hyp.score <= 0.0 {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
         }
+        let Some((pose, fit, bands)) = self.refine(frame, t, &hyp) else {
+            return Some(Estimate::missed(Miss::LowConfidence, 0.0));
+        };
+        Some(self.verdict(frame, t, &hyp, &pose, &fit, &bands))
+    }
+
+    /// The grey-level fit of a hypothesis: a coarse pass on bands placed from the search,
+    /// a final pass on bands placed from the coarse lines, and if an edge turns out far
+    /// fainter than calibrated (something sitting on it) while two others hold, a last
+    /// pass without it.
+    fn refine(
+        &mut self,
+        frame: &GrayImage,
+        t: &Template,
+        hyp: &Hypothesis,
+    ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
         let k = self.pyr.factor as f64;
         let pose = Pose {
             psi: hyp.pose.psi,
@@ -183,45 +206,38 @@ impl Tracker {
         let size = [frame.width() as f64, frame.height() as f64];
         // Fit the edges the search found: its lines, and a left-out edge only where the
         // edge map confirms it (a pair leaves the scale, hence that edge, uncertain).
-        let confirmed: [bool; 3] = std::array::from_fn(|e| {
+        let mut keep: [bool; 3] = std::array::from_fn(|e| {
             hyp.members[e].is_some() || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
         });
-        let keep = |b: [Option<Band>; 3]| -> [Option<Band>; 3] {
-            std::array::from_fn(|e| b[e].filter(|_| confirmed[e]))
+        let only = |b: [Option<Band>; 3], keep: &[bool; 3]| -> [Option<Band>; 3] {
+            std::array::from_fn(|e| b[e].filter(|_| keep[e]))
         };
         let prior = self.bend_prior(t, &pose, 0.0);
-        let first = keep(bands(t, &pose, size, self.blur, prior));
+        let first = only(bands(t, &pose, size, self.blur, prior), &keep);
         let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
-        // Second pass on bands placed from the refined lines.
         let pose = refined_pose(t, &pose, &fit);
         let prior = self.bend_prior(t, &pose, fit.bend);
-        let bands = keep(bands(t, &pose, size, self.blur, prior));
-        let fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
-        if std::env::var("NF_BEND").is_ok() && bands[RED].is_some() {
-            let physics = {
-                let saved = std::env::var("NF_NOPRIOR").ok();
-                let _ = saved;
-                let length_px = self
-                    .cantilever
-                    .map_or(0.0, |c| c.length_um * t.height * pose.scale / TIP_HEIGHT_UM);
-                let alpha = ModelTable::global().alpha_rad(pose.psi.abs()).value;
-                let red = &t.edges[RED];
-                let towards_clamp = scale(along(red.normal), (red.far_tau - red.tip_tau).signum());
-                let handed = dot([-towards_clamp[1], towards_clamp[0]], red.normal);
-                -pose.psi.signum() * alpha * pose.psi.cos() * BEND_UNIT_PX.powi(3)
-                    / (6.0 * length_px * length_px)
-                    * handed
-            };
-            eprintln!(
-                "BEND angle {:+.2} fitted {:+.4} physics {:+.4} band len {:.0}",
-                -pose.psi.to_degrees(),
-                fit.bend,
-                physics,
-                bands[RED].map_or(0.0, |b| norm(sub(b.end, b.start)))
-            );
+        let mut bands = only(bands(t, &pose, size, self.blur, prior), &keep);
+        let mut fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+        let ratio = |fit: &FitResult, e: usize| {
+            fit.edges[e].map_or(0.0, |r| {
+                r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
+            })
+        };
+        let fitted: Vec3Mask =
+            std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some());
+        let weak: Vec3Mask =
+            std::array::from_fn(|e| fitted[e] && ratio(&fit, e) < DROP_CONTRAST_RATIO);
+        let strong = (0..3).filter(|&e| fitted[e] && !weak[e]).count();
+        if weak.iter().any(|&w| w) && strong >= 2 {
+            for e in 0..3 {
+                keep[e] &= !weak[e];
+            }
+            bands = only(bands, &keep);
+            fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         }
         let pose = refined_pose(t, &pose, &fit);
-        Some(self.verdict(frame, t, &hyp, &pose, &fit, &bands))
+        Some((pose, fit, bands))
     }
 
     /// What the elastica says the beam's bend should be (see [`BendPrior`]); without a

@@ -21,7 +21,7 @@ use super::template::{Pose, Template, BLUE, GREEN};
 /// Smallest confidence reported as a detection.
 pub const MIN_CONFIDENCE: f64 = 0.5;
 /// An edge in view with less than this fraction of its calibrated contrast is missing.
-const MIN_CONTRAST_RATIO: f64 = 0.2;
+pub const MIN_CONTRAST_RATIO: f64 = 0.2;
 /// Fewest pyramid-interior samples for the brightness check.
 const MIN_INTERIOR_SAMPLES: usize = 8;
 /// Most interior samples (a grid is thinned to about this many).
