@@ -146,7 +146,9 @@ impl Candidates {
             if (dot(c.normal, q) - rho).abs() > INLIER_PX || p.alignment(c.normal) < INLIER_COS {
                 continue;
             }
-            let i = ((dot(d, sub(q, c.centroid)) - t0) / c.bin).floor();
+            // Truncation is floor here (non-negative); f64::floor is a libm call on
+            // baseline x86-64.
+            let i = (dot(d, sub(q, c.centroid)) - t0) / c.bin;
             if i >= 0.0 && (i as usize) < c.bins {
                 marks[i as usize] = 1;
             }
@@ -169,8 +171,8 @@ impl Candidates {
     /// line (`t` from its centroid, either order).
     pub fn support(&self, c: &Candidate, ta: f64, tb: f64) -> (f64, f64) {
         let (lo, hi) = (ta.min(tb), ta.max(tb));
-        let a = ((lo - c.t_first) / c.bin).round().clamp(0.0, c.bins as f64) as usize;
-        let b = ((hi - c.t_first) / c.bin).round().clamp(0.0, c.bins as f64) as usize;
+        let bin_of = |t: f64| ((t - c.t_first) / c.bin + 0.5).clamp(0.0, c.bins as f64) as usize;
+        let (a, b) = (bin_of(lo), bin_of(hi));
         if b <= a {
             return (0.0, 0.0);
         }

@@ -108,8 +108,9 @@ impl EdgeMap {
                     continue;
                 }
                 let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
-                let bx = (x as f32 + BRIGHT_SIDE_PX * ux).round() as usize;
-                let by = (y as f32 + BRIGHT_SIDE_PX * uy).round() as usize;
+                // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
+                let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as usize;
+                let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as usize;
                 if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
                     continue;
                 }
@@ -179,11 +180,12 @@ impl EdgeMap {
     /// a pixel of `p` across the line of unit normal `normal`.
     pub fn supports(&self, p: [f64; 2], normal: [f64; 2], normal_angle: f64, tol: f64) -> bool {
         for k in [-1.0, 0.0, 1.0] {
-            let x = (p[0] + k * normal[0]).round();
-            let y = (p[1] + k * normal[1]).round();
+            let x = p[0] + k * normal[0] + 0.5;
+            let y = p[1] + k * normal[1] + 0.5;
             if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
                 continue;
             }
+            // Non-negative: truncation rounds (f64::round is a libm call on x86-64).
             let code = self.direction[y as usize * self.width + x as usize];
             if code != 0 && wrap_pi(code_angle(code) as f64 - normal_angle).abs() < tol {
                 return true;

@@ -27,8 +27,8 @@ const ITERATIONS: usize = 6;
 const ITERATIONS_COARSE: usize = 4;
 const SUBSAMPLED_ITERATIONS: usize = 2;
 /// Converged when a step moves the rotation and every offset less than this.
-const DONE_TURN_RAD: f64 = 2e-6;
-const DONE_OFFSET_PX: f64 = 2e-3;
+const DONE_TURN_RAD: f64 = 5e-6;
+const DONE_OFFSET_PX: f64 = 5e-3;
 /// Normalisation of the along-edge coordinates (keeps the normal equations balanced).
 const ALONG_UNIT_PX: f64 = 100.0;
 const N_PARAMS: usize = 8 + 3 * PHOTO;
@@ -514,7 +514,11 @@ struct EdgeSums {
 
 /// The inner loop of the fit: residual, robust weight and Jacobian of every sample of
 /// one edge, accumulated. Stretch statistics are gathered for every sample; samples of
-/// rejected stretches contribute nothing else.
+/// rejected stretches contribute nothing else. Samples go four at a time through
+/// lane arrays, which the compiler turns into vector arithmetic for the 44 products per
+/// sample of the normal equations.
+// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+#[allow(clippy::needless_range_loop)]
 fn accumulate_edge(
     samples: &[Sample],
     step: usize,
@@ -524,20 +528,37 @@ fn accumulate_edge(
     chunk_sq: &mut [f64],
     chunk_n: &mut [u32],
 ) -> EdgeSums {
-    let mut out = EdgeSums {
-        h: [0.0; 36],
-        g: [0.0; 8],
-        sq: 0.0,
-        wsum: 0.0,
-    };
+    const LANES: usize = 4;
+    let mut h = [[0.0f64; LANES]; 36];
+    let mut g = [[0.0f64; LANES]; 8];
+    let (mut sq, mut wsum) = (0.0, 0.0);
     let inv_blur = 1.0 / p.blur;
-    let towards_far = f.towards;
     let corner_t = dot(p.along, sub(f.corner, f.origin));
+    let mut j = [[0.0f64; LANES]; 8];
+    let mut wt = [0.0f64; LANES];
+    let mut res = [0.0f64; LANES];
+    let mut lane = 0;
+    let mut flush = |j: &[[f64; LANES]; 8], wt: &[f64; LANES], res: &[f64; LANES]| {
+        let mut k = 0;
+        for a in 0..8 {
+            let mut wa = [0.0; LANES];
+            for l in 0..LANES {
+                wa[l] = wt[l] * j[a][l];
+                g[a][l] += wa[l] * res[l];
+            }
+            for b in a..8 {
+                for l in 0..LANES {
+                    h[k][l] += wa[l] * j[b][l];
+                }
+                k += 1;
+            }
+        }
+    };
     for s in samples.iter().step_by(step) {
         let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
         let u = p.along[0] * rel[0] + p.along[1] * rel[1];
         let w = if f.curved {
-            (towards_far * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
+            (f.towards * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
         } else {
             0.0
         };
@@ -559,65 +580,33 @@ fn accumulate_edge(
         } else {
             p.huber / r.abs()
         };
-        out.sq += weight * r * r;
-        out.wsum += weight;
+        sq += weight * r * r;
+        wsum += weight;
         let dd = contrast * pdf * inv_blur;
-        let j = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
-        // Unrolled upper triangle of w j j^T (the compiler keeps it in registers).
-        let w0 = weight * j[0];
-        out.g[0] += w0 * r;
-        out.h[0] += w0 * j[0];
-        out.h[1] += w0 * j[1];
-        out.h[2] += w0 * j[2];
-        out.h[3] += w0 * j[3];
-        out.h[4] += w0 * j[4];
-        out.h[5] += w0 * j[5];
-        out.h[6] += w0 * j[6];
-        out.h[7] += w0 * j[7];
-        let w1 = weight * j[1];
-        out.g[1] += w1 * r;
-        out.h[8] += w1 * j[1];
-        out.h[9] += w1 * j[2];
-        out.h[10] += w1 * j[3];
-        out.h[11] += w1 * j[4];
-        out.h[12] += w1 * j[5];
-        out.h[13] += w1 * j[6];
-        out.h[14] += w1 * j[7];
-        let w2 = weight * j[2];
-        out.g[2] += w2 * r;
-        out.h[15] += w2 * j[2];
-        out.h[16] += w2 * j[3];
-        out.h[17] += w2 * j[4];
-        out.h[18] += w2 * j[5];
-        out.h[19] += w2 * j[6];
-        out.h[20] += w2 * j[7];
-        let w3 = weight * j[3];
-        out.g[3] += w3 * r;
-        out.h[21] += w3 * j[3];
-        out.h[22] += w3 * j[4];
-        out.h[23] += w3 * j[5];
-        out.h[24] += w3 * j[6];
-        out.h[25] += w3 * j[7];
-        let w4 = weight * j[4];
-        out.g[4] += w4 * r;
-        out.h[26] += w4 * j[4];
-        out.h[27] += w4 * j[5];
-        out.h[28] += w4 * j[6];
-        out.h[29] += w4 * j[7];
-        let w5 = weight * j[5];
-        out.g[5] += w5 * r;
-        out.h[30] += w5 * j[5];
-        out.h[31] += w5 * j[6];
-        out.h[32] += w5 * j[7];
-        let w6 = weight * j[6];
-        out.g[6] += w6 * r;
-        out.h[33] += w6 * j[6];
-        out.h[34] += w6 * j[7];
-        let w7 = weight * j[7];
-        out.g[7] += w7 * r;
-        out.h[35] += w7 * j[7];
+        let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
+        for (ja, v) in j.iter_mut().zip(jac) {
+            ja[lane] = v;
+        }
+        wt[lane] = weight;
+        res[lane] = r;
+        lane += 1;
+        if lane == LANES {
+            flush(&j, &wt, &res);
+            lane = 0;
+        }
     }
-    out
+    if lane > 0 {
+        for l in lane..LANES {
+            wt[l] = 0.0;
+        }
+        flush(&j, &wt, &res);
+    }
+    EdgeSums {
+        h: h.map(|v| v.iter().sum()),
+        g: g.map(|v| v.iter().sum()),
+        sq,
+        wsum,
+    }
 }
 
 /// Half-width of the band of pixels fitted around an edge, for a blur (pixels).
