@@ -377,8 +377,8 @@ fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
     let mut best_pose = h.pose;
     let mut best_cov = missing(h, &h.pose);
     let mut best = total(h, &best_cov);
-    if let Some(p) = h.plateau {
-        let ratio = (p.scale_hi / p.scale_lo).max(1.0);
+    if let Some(p) = h.plateau.filter(|p| p.scale_hi > p.scale_lo * SCALE_STEP) {
+        let ratio = p.scale_hi / p.scale_lo;
         for k in 0..=PLATEAU_STEPS {
             let scale = p.scale_lo * ratio.powf(k as f64 / PLATEAU_STEPS as f64);
             let apex = [

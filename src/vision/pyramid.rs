@@ -118,44 +118,64 @@ impl Pyramid {
         if w < 5 || h < 5 {
             return;
         }
-        // Horizontal pass: derivative [-1 -2 0 2 1] and smoothing [1 4 6 4 1].
+        // Horizontal pass: derivative [-1 -2 0 2 1] and smoothing [1 4 6 4 1]. Shifted
+        // slices zipped together vectorise; windows() does not.
         for y in 0..h {
             let row = &self.grey[y * w..(y + 1) * w];
-            let dx = &mut self.scratch_a[y * w + 2..(y + 1) * w - 2];
-            let sx = &mut self.scratch_b[y * w + 2..(y + 1) * w - 2];
-            for ((d, s), win) in dx.iter_mut().zip(sx.iter_mut()).zip(row.windows(5)) {
-                let (a, b, c, dd, e) = (win[0], win[1], win[2], win[3], win[4]);
-                *d = 2.0 * (dd - b) + (e - a);
-                *s = a + e + 4.0 * (b + dd) + 6.0 * c;
+            let n = w - 4;
+            let (a, b, c, d, e) = (
+                &row[..n],
+                &row[1..n + 1],
+                &row[2..n + 2],
+                &row[3..n + 3],
+                &row[4..],
+            );
+            let dx = &mut self.scratch_a[y * w + 2..y * w + 2 + n];
+            for ((((o, &a), &b), &d), &e) in dx.iter_mut().zip(a).zip(b).zip(d).zip(e) {
+                *o = 2.0 * (d - b) + (e - a);
+            }
+            let sx = &mut self.scratch_b[y * w + 2..y * w + 2 + n];
+            for (((((o, &a), &b), &c), &d), &e) in sx.iter_mut().zip(a).zip(b).zip(c).zip(d).zip(e)
+            {
+                *o = a + e + 4.0 * (b + d) + 6.0 * c;
             }
         }
         // Vertical pass; 1/128 makes both components grey levels per pixel.
         let norm = 1.0 / 128.0;
         for y in 2..h - 2 {
+            let rows = |buf: &[f32], dy: usize| -> std::ops::Range<usize> {
+                let _ = buf;
+                (y + dy - 2) * w + 2..(y + dy - 1) * w - 2
+            };
             let d = &self.scratch_a;
             let s = &self.scratch_b;
             let (d0, d1, d2, d3, d4) = (
-                &d[(y - 2) * w..(y - 1) * w],
-                &d[(y - 1) * w..y * w],
-                &d[y * w..(y + 1) * w],
-                &d[(y + 1) * w..(y + 2) * w],
-                &d[(y + 2) * w..(y + 3) * w],
+                &d[rows(d, 0)],
+                &d[rows(d, 1)],
+                &d[rows(d, 2)],
+                &d[rows(d, 3)],
+                &d[rows(d, 4)],
             );
             let (s0, s1, s3, s4) = (
-                &s[(y - 2) * w..(y - 1) * w],
-                &s[(y - 1) * w..y * w],
-                &s[(y + 1) * w..(y + 2) * w],
-                &s[(y + 2) * w..(y + 3) * w],
+                &s[rows(s, 0)],
+                &s[rows(s, 1)],
+                &s[rows(s, 3)],
+                &s[rows(s, 4)],
             );
-            let gx = &mut self.gx[y * w..(y + 1) * w];
-            let gy = &mut self.gy[y * w..(y + 1) * w];
-            let mag = &mut self.mag[y * w..(y + 1) * w];
-            for x in 2..w - 2 {
-                let vx = (d0[x] + d4[x] + 4.0 * (d1[x] + d3[x]) + 6.0 * d2[x]) * norm;
-                let vy = (2.0 * (s3[x] - s1[x]) + s4[x] - s0[x]) * norm;
-                gx[x] = vx;
-                gy[x] = vy;
-                mag[x] = (vx * vx + vy * vy).sqrt();
+            let out = y * w + 2..(y + 1) * w - 2;
+            let gx = &mut self.gx[out.clone()];
+            for (((((o, &a), &b), &c), &dd), &e) in
+                gx.iter_mut().zip(d0).zip(d1).zip(d2).zip(d3).zip(d4)
+            {
+                *o = (a + e + 4.0 * (b + dd) + 6.0 * c) * norm;
+            }
+            let gy = &mut self.gy[out.clone()];
+            for ((((o, &a), &b), &dd), &e) in gy.iter_mut().zip(s0).zip(s1).zip(s3).zip(s4) {
+                *o = (2.0 * (dd - b) + e - a) * norm;
+            }
+            let mag = &mut self.mag[out.clone()];
+            for ((m, &x), &y) in mag.iter_mut().zip(&self.gx[out.clone()]).zip(&self.gy[out]) {
+                *m = (x * x + y * y).sqrt();
             }
         }
     }

@@ -20,12 +20,12 @@ use super::geometry::{along, dot, rotate, sub, Line};
 
 /// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
-const MAX_SAMPLES_PER_EDGE_COARSE: usize = 600;
+const MAX_SAMPLES_PER_EDGE_COARSE: usize = 400;
 /// Gauss-Newton iterations at most (final, coarse), of which the first few on every
 /// other pixel.
-const ITERATIONS: usize = 6;
-const ITERATIONS_COARSE: usize = 4;
-const SUBSAMPLED_ITERATIONS: usize = 2;
+const ITERATIONS: usize = 5;
+const ITERATIONS_COARSE: usize = 3;
+const SUBSAMPLED_ITERATIONS: usize = 1;
 /// Converged when a step moves the rotation and every offset less than this.
 const DONE_TURN_RAD: f64 = 5e-6;
 const DONE_OFFSET_PX: f64 = 5e-3;
@@ -216,7 +216,7 @@ impl Refiner {
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
-            if (1..=2).contains(&iter) {
+            if iter <= SUBSAMPLED_ITERATIONS {
                 self.reject_chunks();
             }
             let done = (P_TURN..P_TURN + 3).all(|k| step[k].abs() < DONE_TURN_RAD)
