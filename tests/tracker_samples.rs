@@ -50,7 +50,9 @@ fn profile_loop() {
     tr.set_coherence(false);
     let f = s.frame("frame_00001.png");
     let t0 = std::time::Instant::now();
-    let n = 300;
+    let n: u32 = std::env::var("N")
+        .map(|s| s.parse().unwrap())
+        .unwrap_or(300);
     for _ in 0..n {
         std::hint::black_box(tr.track(&f));
     }

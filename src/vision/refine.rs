@@ -528,8 +528,13 @@ fn accumulate_edge(
     chunk_sq: &mut [f64],
     chunk_n: &mut [u32],
 ) -> EdgeSums {
+    // The normal matrix is accumulated in f32 lanes (its rounding only slows the
+    // convergence a little), flushed into f64 every BLOCK samples; the gradient, which
+    // decides where the fit stops, stays in f64.
     const LANES: usize = 4;
-    let mut h = [[0.0f64; LANES]; 36];
+    const BLOCK: usize = 64;
+    let mut h_total = [0.0f64; 36];
+    let mut h = [[0.0f32; LANES]; 36];
     let mut g = [[0.0f64; LANES]; 8];
     let (mut sq, mut wsum) = (0.0, 0.0);
     let inv_blur = 1.0 / p.blur;
@@ -538,20 +543,36 @@ fn accumulate_edge(
     let mut wt = [0.0f64; LANES];
     let mut res = [0.0f64; LANES];
     let mut lane = 0;
-    let mut flush = |j: &[[f64; LANES]; 8], wt: &[f64; LANES], res: &[f64; LANES]| {
+    let mut pending = 0;
+    let flush = |j: &[[f64; LANES]; 8],
+                 wt: &[f64; LANES],
+                 res: &[f64; LANES],
+                 h: &mut [[f32; LANES]; 36],
+                 g: &mut [[f64; LANES]; 8]| {
+        let mut jf = [[0.0f32; LANES]; 8];
+        let mut wf = [[0.0f32; LANES]; 8];
+        for a in 0..8 {
+            for l in 0..LANES {
+                let wa = wt[l] * j[a][l];
+                g[a][l] += wa * res[l];
+                jf[a][l] = j[a][l] as f32;
+                wf[a][l] = wa as f32;
+            }
+        }
         let mut k = 0;
         for a in 0..8 {
-            let mut wa = [0.0; LANES];
-            for l in 0..LANES {
-                wa[l] = wt[l] * j[a][l];
-                g[a][l] += wa[l] * res[l];
-            }
             for b in a..8 {
                 for l in 0..LANES {
-                    h[k][l] += wa[l] * j[b][l];
+                    h[k][l] += wf[a][l] * jf[b][l];
                 }
                 k += 1;
             }
+        }
+    };
+    let drain = |h: &mut [[f32; LANES]; 36], total: &mut [f64; 36]| {
+        for (t, v) in total.iter_mut().zip(h.iter_mut()) {
+            *t += v.iter().map(|&x| x as f64).sum::<f64>();
+            *v = [0.0; LANES];
         }
     };
     for s in samples.iter().step_by(step) {
@@ -591,18 +612,24 @@ fn accumulate_edge(
         res[lane] = r;
         lane += 1;
         if lane == LANES {
-            flush(&j, &wt, &res);
+            flush(&j, &wt, &res, &mut h, &mut g);
             lane = 0;
+            pending += LANES;
+            if pending >= BLOCK {
+                drain(&mut h, &mut h_total);
+                pending = 0;
+            }
         }
     }
     if lane > 0 {
         for l in lane..LANES {
             wt[l] = 0.0;
         }
-        flush(&j, &wt, &res);
+        flush(&j, &wt, &res, &mut h, &mut g);
     }
+    drain(&mut h, &mut h_total);
     EdgeSums {
-        h: h.map(|v| v.iter().sum()),
+        h: h_total,
         g: g.map(|v| v.iter().sum()),
         sq,
         wsum,
