@@ -205,17 +205,6 @@ impl Search {
         } else {
             scan_scale(&rows[..2], psi, partial)
         };
-        if std::env::var("NF_CONSIDER").is_ok() {
-            eprintln!(
-                "consider {idx:?} psi {:.2}: {:?}",
-                -psi.to_degrees(),
-                best.map(|b| (
-                    b.0.scale,
-                    b.1.map(|c| (c.supported.round(), c.visible.round())),
-                    b.2
-                ))
-            );
-        }
         if let Some((pose, coverage, score, plateau)) = best {
             self.shortlist_insert(Hypothesis {
                 pose,

@@ -18,6 +18,12 @@ use image::GrayImage;
 
 use super::geometry::{along, dot, rotate, sub, Line};
 
+mod gauss;
+mod kernel;
+mod solve;
+
+use solve::{apply, solve, variance, Normal};
+
 /// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
 const MAX_SAMPLES_PER_EDGE_COARSE: usize = 400;
@@ -199,9 +205,7 @@ impl Refiner {
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
         self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
-        let mut iterations = 0;
         for iter in 0..iterations_max {
-            iterations += 1;
             // The first iterations, far from the solution, on every other pixel.
             let step = if iter < SUBSAMPLED_ITERATIONS { 2 } else { 1 };
             let mut ne = self.normal_equations(&frames, &x, &noise, shared, step);
@@ -227,14 +231,6 @@ impl Refiner {
             }
         }
         let ne = last?;
-        if std::env::var("NF_DEBUG").is_ok() {
-            eprintln!(
-                "fit: {} samples {:?}, {} iterations",
-                self.samples.len(),
-                self.ranges,
-                iterations
-            );
-        }
         Some(self.result(&frames, &x, &ne, shared))
     }
 
@@ -353,100 +349,6 @@ impl Refiner {
         }
     }
 
-    fn normal_equations(
-        &mut self,
-        frames: &[Option<EdgeFrame>; 3],
-        x: &[f64; N_PARAMS],
-        noise: &[f64; 3],
-        shared: bool,
-        step: usize,
-    ) -> Normal {
-        let mut ne = Normal::default();
-        self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
-        self.chunk_n = [0; 3 * CHUNKS_PER_EDGE];
-        let mut sq = [0.0f64; 3];
-        let mut wsum = [0.0f64; 3];
-        let blur = x[P_BLUR];
-        let normals: [[f64; 2]; 3] = std::array::from_fn(|e| {
-            let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
-            frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
-        });
-        for (e, f) in frames.iter().enumerate() {
-            let Some(f) = f else { continue };
-            let turn_index = if shared { P_TURN } else { P_TURN + e };
-            let p0 = P_PHOTO + PHOTO * e;
-            let slots = [
-                turn_index,
-                P_OFFSET + e,
-                P_BEND,
-                P_BLUR,
-                p0,
-                p0 + 1,
-                p0 + 2,
-                p0 + 3,
-            ];
-            let params = EdgeParams {
-                normal: normals[e],
-                along: along(normals[e]),
-                offset: x[P_OFFSET + e],
-                bend: x[P_BEND],
-                blur,
-                photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
-                huber: 1.5 * noise[e],
-            };
-            let range = self.ranges[e].clone();
-            let acc = accumulate_edge(
-                &self.samples[range],
-                step,
-                f,
-                &params,
-                &self.chunk_ok,
-                &mut self.chunk_sq,
-                &mut self.chunk_n,
-            );
-            sq[e] = acc.sq;
-            wsum[e] = acc.wsum;
-            let mut k = 0;
-            for i in 0..8 {
-                ne.g[slots[i]] += acc.g[i];
-                for j in i..8 {
-                    ne.h[slots[i]][slots[j]] += acc.h[k];
-                    if i != j {
-                        ne.h[slots[j]][slots[i]] += acc.h[k];
-                    }
-                    k += 1;
-                }
-            }
-        }
-        for e in 0..3 {
-            ne.noise[e] = if wsum[e] > 0.0 {
-                (sq[e] / wsum[e]).sqrt().max(0.5)
-            } else {
-                f64::INFINITY
-            };
-            if frames[e].is_none() {
-                ne.fixed[P_OFFSET + e] = true;
-                ne.fixed[P_TURN + e] = true;
-                for k in 0..PHOTO {
-                    ne.fixed[P_PHOTO + PHOTO * e + k] = true;
-                }
-            }
-        }
-        if shared {
-            ne.fixed[P_TURN + 1] = true;
-            ne.fixed[P_TURN + 2] = true;
-        }
-        if !frames.iter().flatten().any(|f| f.curved) {
-            ne.fixed[P_BEND] = true;
-        }
-        if std::env::var("NF_NOCSLOPE").is_ok() {
-            for e in 0..3 {
-                ne.fixed[P_PHOTO + PHOTO * e + 3] = true;
-            }
-        }
-        ne
-    }
-
     fn result(
         &self,
         frames: &[Option<EdgeFrame>; 3],
@@ -489,346 +391,15 @@ impl Refiner {
     }
 }
 
-/// The current parameters of one edge, as the inner loop needs them.
-struct EdgeParams {
-    normal: [f64; 2],
-    along: [f64; 2],
-    offset: f64,
-    bend: f64,
-    blur: f64,
-    /// level, level slope, contrast, contrast slope
-    photo: [f64; 4],
-    /// Huber threshold on the residual, grey levels.
-    huber: f64,
-}
-
-/// One edge's contribution to the normal equations, in the local parameter order
-/// (turn, offset, bend, blur, level, level slope, contrast, contrast slope); `h` is
-/// the upper triangle row by row.
-struct EdgeSums {
-    h: [f64; 36],
-    g: [f64; 8],
-    sq: f64,
-    wsum: f64,
-}
-
-/// The inner loop of the fit: residual, robust weight and Jacobian of every sample of
-/// one edge, accumulated. Stretch statistics are gathered for every sample; samples of
-/// rejected stretches contribute nothing else. Samples go four at a time through
-/// lane arrays, which the compiler turns into vector arithmetic for the 44 products per
-/// sample of the normal equations.
-// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
-#[allow(clippy::needless_range_loop)]
-fn accumulate_edge(
-    samples: &[Sample],
-    step: usize,
-    f: &EdgeFrame,
-    p: &EdgeParams,
-    chunk_ok: &[bool],
-    chunk_sq: &mut [f64],
-    chunk_n: &mut [u32],
-) -> EdgeSums {
-    // The normal matrix is accumulated in f32 lanes (its rounding only slows the
-    // convergence a little), flushed into f64 every BLOCK samples; the gradient, which
-    // decides where the fit stops, stays in f64.
-    const LANES: usize = 4;
-    const BLOCK: usize = 64;
-    let mut h_total = [0.0f64; 36];
-    let mut h = [[0.0f32; LANES]; 36];
-    let mut g = [[0.0f64; LANES]; 8];
-    let (mut sq, mut wsum) = (0.0, 0.0);
-    let inv_blur = 1.0 / p.blur;
-    let corner_t = dot(p.along, sub(f.corner, f.origin));
-    let mut j = [[0.0f64; LANES]; 8];
-    let mut wt = [0.0f64; LANES];
-    let mut res = [0.0f64; LANES];
-    let mut lane = 0;
-    let mut pending = 0;
-    let flush = |j: &[[f64; LANES]; 8],
-                 wt: &[f64; LANES],
-                 res: &[f64; LANES],
-                 h: &mut [[f32; LANES]; 36],
-                 g: &mut [[f64; LANES]; 8]| {
-        let mut jf = [[0.0f32; LANES]; 8];
-        let mut wf = [[0.0f32; LANES]; 8];
-        for a in 0..8 {
-            for l in 0..LANES {
-                let wa = wt[l] * j[a][l];
-                g[a][l] += wa * res[l];
-                jf[a][l] = j[a][l] as f32;
-                wf[a][l] = wa as f32;
-            }
-        }
-        let mut k = 0;
-        for a in 0..8 {
-            for b in a..8 {
-                for l in 0..LANES {
-                    h[k][l] += wf[a][l] * jf[b][l];
-                }
-                k += 1;
-            }
-        }
-    };
-    let drain = |h: &mut [[f32; LANES]; 36], total: &mut [f64; 36]| {
-        for (t, v) in total.iter_mut().zip(h.iter_mut()) {
-            *t += v.iter().map(|&x| x as f64).sum::<f64>();
-            *v = [0.0; LANES];
-        }
-    };
-    for s in samples.iter().step_by(step) {
-        let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
-        let u = p.along[0] * rel[0] + p.along[1] * rel[1];
-        let w = if f.curved {
-            (f.towards * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
-        } else {
-            0.0
-        };
-        let w3 = w * w * w;
-        let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3;
-        let z = d * inv_blur;
-        let (cdf, pdf) = cdf_pdf(z);
-        let un = u * (1.0 / ALONG_UNIT_PX);
-        let contrast = p.photo[2] + p.photo[3] * un;
-        let r = s.value as f64 - (p.photo[0] + p.photo[1] * un + contrast * cdf);
-        let c = s.chunk as usize;
-        chunk_sq[c] += r * r;
-        chunk_n[c] += 1;
-        if !chunk_ok[c] {
-            continue;
-        }
-        let weight = if r.abs() <= p.huber {
-            1.0
-        } else {
-            p.huber / r.abs()
-        };
-        sq += weight * r * r;
-        wsum += weight;
-        let dd = contrast * pdf * inv_blur;
-        let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
-        for (ja, v) in j.iter_mut().zip(jac) {
-            ja[lane] = v;
-        }
-        wt[lane] = weight;
-        res[lane] = r;
-        lane += 1;
-        if lane == LANES {
-            flush(&j, &wt, &res, &mut h, &mut g);
-            lane = 0;
-            pending += LANES;
-            if pending >= BLOCK {
-                drain(&mut h, &mut h_total);
-                pending = 0;
-            }
-        }
-    }
-    if lane > 0 {
-        for l in lane..LANES {
-            wt[l] = 0.0;
-        }
-        flush(&j, &wt, &res, &mut h, &mut g);
-    }
-    drain(&mut h, &mut h_total);
-    EdgeSums {
-        h: h_total,
-        g: g.map(|v| v.iter().sum()),
-        sq,
-        wsum,
-    }
-}
-
 /// Half-width of the band of pixels fitted around an edge, for a blur (pixels).
 pub fn half_width(blur: f64) -> f64 {
     2.0 * blur + 2.5
 }
 
-/// The normal CDF and density tabulated on [-CDF_RANGE, CDF_RANGE] every 1/CDF_STEPS:
-/// the inner loop's exponentials were half the cost of a frame.
-const CDF_RANGE: f64 = 8.0;
-const CDF_STEPS: f64 = 16.0;
-const CDF_NODES: usize = (2.0 * CDF_RANGE * CDF_STEPS) as usize + 2;
-static CDF_TABLE: std::sync::OnceLock<[[f64; 2]; CDF_NODES]> = std::sync::OnceLock::new();
-
-fn cdf_table() -> &'static [[f64; 2]; CDF_NODES] {
-    CDF_TABLE.get_or_init(|| {
-        let mut t = [[0.0; 2]; CDF_NODES];
-        for (k, node) in t.iter_mut().enumerate() {
-            let z = -CDF_RANGE + k as f64 / CDF_STEPS;
-            *node = [normal_cdf(z), normal_pdf(z)];
-        }
-        t
-    })
-}
-
-/// Standard normal CDF (cubic Hermite between the tabulated values and slopes, error
-/// below 1e-7) and density (linear, error below 2e-4), outside the table 0/1 and 0.
-#[inline]
-fn cdf_pdf(z: f64) -> (f64, f64) {
-    let pos = (z + CDF_RANGE) * CDF_STEPS;
-    if pos <= 0.0 {
-        return (0.0, 0.0);
-    }
-    let k = pos as usize;
-    if k + 1 >= CDF_NODES {
-        return (1.0, 0.0);
-    }
-    let table = cdf_table();
-    let (a, b) = (table[k], table[k + 1]);
-    let t = pos - k as f64;
-    let h = 1.0 / CDF_STEPS;
-    let (t2, t3) = (t * t, t * t * t);
-    let cdf = (2.0 * t3 - 3.0 * t2 + 1.0) * a[0]
-        + (t3 - 2.0 * t2 + t) * h * a[1]
-        + (-2.0 * t3 + 3.0 * t2) * b[0]
-        + (t3 - t2) * h * b[1];
-    (cdf, a[1] + t * (b[1] - a[1]))
-}
-
-/// Standard normal density.
-fn normal_pdf(z: f64) -> f64 {
-    0.398_942_280_401_432_7 * (-0.5 * z * z).exp()
-}
-
-/// Accumulated normal equations `h * step = g` of one iteration.
-#[derive(Debug, Clone, Copy)]
-struct Normal {
-    h: [[f64; N_PARAMS]; N_PARAMS],
-    g: [f64; N_PARAMS],
-    fixed: [bool; N_PARAMS],
-    noise: [f64; 3],
-}
-
-impl Default for Normal {
-    fn default() -> Self {
-        Normal {
-            h: [[0.0; N_PARAMS]; N_PARAMS],
-            g: [0.0; N_PARAMS],
-            fixed: [false; N_PARAMS],
-            noise: [f64::INFINITY; 3],
-        }
-    }
-}
-
-/// Solves the damped normal equations with the fixed parameters held. The system is
-/// scaled to a unit diagonal first, so "no information about a parameter" (a bend with
-/// no bent pixels, a band of one flat level) is recognised relative to the others and
-/// that parameter is held instead of failing the solve.
-// Index loops mirror the textbook formulas of the small dense solves below.
-#[allow(clippy::needless_range_loop)]
-fn solve(
-    h: &[[f64; N_PARAMS]; N_PARAMS],
-    g: &[f64; N_PARAMS],
-    fixed: &[bool; N_PARAMS],
-) -> Option<[f64; N_PARAMS]> {
-    let max_diag = (0..N_PARAMS).map(|i| h[i][i]).fold(0.0, f64::max);
-    if max_diag.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !max_diag.is_finite() {
-        return None;
-    }
-    let mut scale = [0.0; N_PARAMS];
-    for i in 0..N_PARAMS {
-        let held = fixed[i]
-            || h[i][i].partial_cmp(&(1e-14 * max_diag)) != Some(std::cmp::Ordering::Greater);
-        scale[i] = if held { 0.0 } else { 1.0 / h[i][i].sqrt() };
-    }
-    let mut a = [[0.0; N_PARAMS]; N_PARAMS];
-    let mut b = [0.0; N_PARAMS];
-    for i in 0..N_PARAMS {
-        for k in 0..N_PARAMS {
-            a[i][k] = h[i][k] * scale[i] * scale[k];
-        }
-        a[i][i] = if scale[i] == 0.0 { 1.0 } else { 1.0 + 1e-9 };
-        b[i] = g[i] * scale[i];
-    }
-    cholesky_solve(&mut a, &mut b);
-    for i in 0..N_PARAMS {
-        b[i] *= scale[i];
-        if !b[i].is_finite() {
-            return None;
-        }
-    }
-    Some(b)
-}
-
-/// Variance factor of parameter `k` ((H^-1)_kk), free parameters only.
-fn variance(h: &[[f64; N_PARAMS]; N_PARAMS], fixed: &[bool; N_PARAMS], k: usize) -> Option<f64> {
-    let mut e = [0.0; N_PARAMS];
-    e[k] = 1.0;
-    let x = solve(h, &e, fixed)?;
-    Some(x[k].max(0.0))
-}
-
-/// In-place Cholesky solve of a symmetric positive semi-definite system; a parameter
-/// whose pivot vanishes (dependent on the others) is held at a zero step.
-#[allow(clippy::needless_range_loop)]
-fn cholesky_solve(a: &mut [[f64; N_PARAMS]; N_PARAMS], b: &mut [f64; N_PARAMS]) {
-    for j in 0..N_PARAMS {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        if d <= 1e-10 {
-            // No independent information left in this parameter: hold it.
-            for i in j + 1..N_PARAMS {
-                a[i][j] = 0.0;
-            }
-            a[j][j] = f64::INFINITY;
-            continue;
-        }
-        let d = d.sqrt();
-        a[j][j] = d;
-        for i in j + 1..N_PARAMS {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s / d;
-        }
-    }
-    for i in 0..N_PARAMS {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[i][k] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-    for i in (0..N_PARAMS).rev() {
-        let mut s = b[i];
-        for k in i + 1..N_PARAMS {
-            s -= a[k][i] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-}
-
-/// Applies a Gauss-Newton step with trust limits on the geometric parameters.
-fn apply(x: &mut [f64; N_PARAMS], step: &[f64; N_PARAMS]) {
-    for (k, (xk, &dk)) in x.iter_mut().zip(step).enumerate() {
-        let limited = match k {
-            P_TURN..=2 => dk.clamp(-0.02, 0.02),
-            P_OFFSET..=5 => dk.clamp(-1.5, 1.5),
-            P_BEND => dk.clamp(-2.0, 2.0),
-            P_BLUR => dk.clamp(-0.3, 0.3),
-            _ => dk,
-        };
-        *xk += limited;
-    }
-    x[P_BLUR] = x[P_BLUR].clamp(0.3, 4.0);
-}
-
-/// Standard normal CDF via erf (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
-pub fn normal_cdf(z: f64) -> f64 {
-    let x = z * std::f64::consts::FRAC_1_SQRT_2;
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let erf = 1.0 - poly * (-x * x).exp();
-    0.5 * (1.0 + erf.copysign(x))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gauss::normal_cdf;
     use image::Luma;
 
     /// A blurred bright half-plane `n . p > rho` with noise-free grey levels.
@@ -838,23 +409,6 @@ mod tests {
             let d = n[0] * x as f64 + n[1] * y as f64 - rho;
             Luma([(60.0 + 150.0 * normal_cdf(d / blur)).round() as u8])
         })
-    }
-
-    #[test]
-    fn tabulated_cdf_matches_the_direct_one() {
-        for i in -1000..=1000 {
-            let z = i as f64 * 0.0093;
-            let (c, p) = cdf_pdf(z);
-            assert!((c - normal_cdf(z)).abs() < 3e-7, "{z}");
-            assert!((p - normal_pdf(z)).abs() < 2e-4, "{z}");
-        }
-    }
-
-    #[test]
-    fn cdf_matches_known_values() {
-        assert!((normal_cdf(0.0) - 0.5).abs() < 1e-7);
-        assert!((normal_cdf(1.0) - 0.841_344_746).abs() < 2e-7);
-        assert!((normal_cdf(-2.0) - 0.022_750_132).abs() < 2e-7);
     }
 
     #[test]
@@ -894,71 +448,5 @@ mod tests {
         let p = e.line.foot([100.0, 60.0]);
         assert!(truth.depth(p).abs() < 0.02, "{}", truth.depth(p));
         assert!((e.contrast - 150.0).abs() < 2.0 && (fit.blur - 1.2).abs() < 0.1);
-    }
-}
-
-#[cfg(test)]
-mod debug_refine {
-    use super::*;
-    use std::path::Path;
-
-    #[test]
-    #[ignore]
-    fn single_band_on_sample() {
-        let f = std::env::var("FRAME").unwrap();
-        let img = image::open(
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data/samples")
-                .join(f),
-        )
-        .unwrap()
-        .to_luma8();
-        let v: Vec<f64> = std::env::var("BAND")
-            .unwrap()
-            .split(',')
-            .map(|s| s.parse().unwrap())
-            .collect();
-        let (p0, p1) = ([v[0], v[1]], [v[2], v[3]]);
-        let d = [(p1[0] - p0[0]), (p1[1] - p0[1])];
-        let len = d[0].hypot(d[1]);
-        let mut n = [-d[1] / len, d[0] / len];
-        // Orient the normal to the bright side.
-        let probe = |p: [f64; 2]| img.get_pixel(p[0] as u32, p[1] as u32)[0] as f64;
-        let mid = [0.5 * (p0[0] + p1[0]), 0.5 * (p0[1] + p1[1])];
-        if probe([mid[0] + 4.0 * n[0], mid[1] + 4.0 * n[1]])
-            < probe([mid[0] - 4.0 * n[0], mid[1] - 4.0 * n[1]])
-        {
-            n = [-n[0], -n[1]];
-        }
-        let line = Line::through(p0, n);
-        let band = Band {
-            start: p0,
-            end: p1,
-            line,
-            bend_from: None,
-            bend0: 0.0,
-            bend_sigma: f64::INFINITY,
-        };
-        let mut r = Refiner::default();
-        let fit = r
-            .fit(&img, &[None, Some(band), None], false, 1.2, false)
-            .unwrap();
-        let e = fit.edges[1].unwrap();
-        let dd = along(e.line.normal);
-        let mut a = -(dd[1].atan2(dd[0])).to_degrees();
-        while a > 90.0 {
-            a -= 180.0;
-        }
-        while a <= -90.0 {
-            a += 180.0;
-        }
-        println!(
-            "orientation {a:.4} blur {:.2} contrast {:.1} noise {:.1} samples {} rejected {}",
-            fit.blur,
-            e.contrast,
-            e.noise,
-            e.samples,
-            r.chunk_ok.iter().filter(|ok| !**ok).count()
-        );
     }
 }
