@@ -20,6 +20,7 @@
 //! Conventions are scene.md's: pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
 
+mod bands;
 mod calibration;
 mod candidates;
 mod edges;

@@ -9,40 +9,23 @@
 
 use image::GrayImage;
 
+use super::bands::{bands, bend_prior, refined_pose, visible_segment};
 use super::calibration::Calibration;
 use super::candidates::Candidates;
 use super::edges::EdgeMap;
-use super::geometry::{
-    add, along, clip_to_rect, dot, norm, scale, screen_deg_from_image_rad, sub, Line,
-};
+use super::geometry::screen_deg_from_image_rad;
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
-use super::refine::{half_width, Band, FitResult, Refiner, BEND_UNIT_PX};
-use super::template::{Pose, Template, BLUE, GREEN, RED};
+use super::refine::{half_width, Band, FitResult, Refiner};
+use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::config::{Threshold, TrackerConfig};
-use crate::model::{Cantilever, ModelTable};
+use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
 const COHERENT_TOL_RAD: f64 = 0.07;
-/// How much of the beam edge (in tip heights from the free end) is fitted: all of it
-/// that is in view, in practice; the bend term takes care of its curvature.
-const RED_SPAN_HEIGHTS: f64 = 4.0;
-/// Typical distance from the apex to the beam's upper face, micrometres (scene.md:
-/// pyramid 9-16 um plus beam 1.5-4 um).
-const TIP_HEIGHT_UM: f64 = 14.5;
-
-/// The beam edge's expected bend (offset at [`BEND_UNIT_PX`] beyond the rigid block,
-/// pixels) from the exact elastica at the current angle, and its uncertainty (mostly
-/// the unknown pixel size of the reference).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct BendPrior {
-    mean: f64,
-    sigma: f64,
-}
-
 /// An edge fitted at less than this share of its calibrated contrast is left out of the
 /// final fit when two others hold (a particle or scratch sitting on it).
 const DROP_CONTRAST_RATIO: f64 = 0.4;
@@ -52,9 +35,6 @@ type Vec3Mask = [bool; 3];
 
 /// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
 const CONFIRMED_FRACTION: f64 = 0.5;
-/// Shortest band worth fitting, frame pixels.
-const MIN_BAND_PX: f64 = 10.0;
-
 /// The last confident estimate, for coherence.
 #[derive(Debug, Clone, Copy)]
 struct Last {
@@ -212,11 +192,11 @@ impl Tracker {
         let only = |b: [Option<Band>; 3], keep: &[bool; 3]| -> [Option<Band>; 3] {
             std::array::from_fn(|e| b[e].filter(|_| keep[e]))
         };
-        let prior = self.bend_prior(t, &pose, 0.0);
+        let prior = bend_prior(t, &pose, self.cantilever, 0.0);
         let first = only(bands(t, &pose, size, self.blur, prior), &keep);
         let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
         let pose = refined_pose(t, &pose, &fit);
-        let prior = self.bend_prior(t, &pose, fit.bend);
+        let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
         let mut bands = only(bands(t, &pose, size, self.blur, prior), &keep);
         let mut fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         let ratio = |fit: &FitResult, e: usize| {
@@ -238,33 +218,6 @@ impl Tracker {
         }
         let pose = refined_pose(t, &pose, &fit);
         Some((pose, fit, bands))
-    }
-
-    /// What the elastica says the beam's bend should be (see [`BendPrior`]); without a
-    /// cantilever, no prior (the band then follows `fitted`).
-    fn bend_prior(&self, t: &Template, pose: &Pose, fitted: f64) -> BendPrior {
-        let Some(cantilever) = self.cantilever else {
-            return BendPrior {
-                mean: fitted,
-                sigma: f64::INFINITY,
-            };
-        };
-        // Pixels per micrometre from the tip's size: apex to beam face is the pyramid
-        // (9-16 um) plus the beam (1.5-4 um), 14.5 um give or take a factor 1.38.
-        let px_per_um = t.height * pose.scale / TIP_HEIGHT_UM;
-        let length_px = cantilever.length_um * px_per_um;
-        let angle = pose.psi.abs();
-        let alpha = ModelTable::global().alpha_rad(angle).value;
-        let red = &t.edges[RED];
-        let towards_clamp = scale(along(red.normal), (red.far_tau - red.tip_tau).signum());
-        let handed = dot([-towards_clamp[1], towards_clamp[0]], red.normal);
-        let unit3 = BEND_UNIT_PX.powi(3);
-        let mean = -pose.psi.signum() * alpha * angle.cos() * unit3 / (6.0 * length_px * length_px)
-            * handed;
-        BendPrior {
-            mean,
-            sigma: 0.7 * mean.abs() + 0.03,
-        }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -325,112 +278,4 @@ impl Tracker {
             miss: None,
         }
     }
-}
-
-/// The part of edge `e`'s predicted segment inside the frame: (corner side, far side).
-fn visible_segment(
-    t: &Template,
-    pose: &Pose,
-    e: usize,
-    size: [f64; 2],
-) -> Option<([f64; 2], [f64; 2])> {
-    let (tip, far) = t.segment(pose, e);
-    let len = sub(far, tip)[0].hypot(sub(far, tip)[1]);
-    if len < 1e-9 {
-        return None;
-    }
-    let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
-    let (a, b) = clip_to_rect(tip, dir, [0.0, 0.0], [size[0] - 1.0, size[1] - 1.0])?;
-    let (a, b) = (a.max(0.0), b.min(len));
-    (b > a).then(|| {
-        (
-            [tip[0] + a * dir[0], tip[1] + a * dir[1]],
-            [tip[0] + b * dir[0], tip[1] + b * dir[1]],
-        )
-    })
-}
-
-/// Bands for the grey-level fit from a pose: each edge's predicted segment, trimmed
-/// at the corners, limited (beam edge) to a few tip heights, clipped to the frame.
-fn bands(
-    t: &Template,
-    pose: &Pose,
-    size: [f64; 2],
-    blur: f64,
-    bend: BendPrior,
-) -> [Option<Band>; 3] {
-    let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
-    let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
-    let reach = half_width(blur) + 2.5 * blur;
-    let margin = 3.0;
-    let (lo_rect, hi_rect) = (
-        [margin, margin],
-        [size[0] - 1.0 - margin, size[1] - 1.0 - margin],
-    );
-    std::array::from_fn(|e| {
-        let line = t.line(pose, e);
-        let (tip, far) = t.segment(pose, e);
-        let full = norm(sub(far, tip));
-        if full < 1.0 {
-            return None;
-        }
-        let dir = scale(sub(far, tip), 1.0 / full);
-        let red = &t.edges[RED];
-        let len = if e == RED {
-            ((t.bend_tau - red.tip_tau).abs() + RED_SPAN_HEIGHTS * t.height) * pose.scale
-        } else {
-            full
-        };
-        let trim_corner = if e == RED { reach } else { reach / sin_apex };
-        let (a, b) = clip_to_rect(tip, dir, lo_rect, hi_rect)?;
-        let (a, b) = (a.max(trim_corner), b.min(len - 1.5 * reach));
-        if b - a < MIN_BAND_PX {
-            return None;
-        }
-        let at = |s: f64| line.foot(add(tip, scale(dir, s)));
-        Some(Band {
-            start: at(a),
-            end: at(b),
-            line,
-            bend_from: (e == RED).then(|| line.foot(t.place(pose, red.point(t.bend_tau)))),
-            bend0: bend.mean,
-            bend_sigma: bend.sigma,
-        })
-    })
-}
-
-/// The pose implied by the fitted lines: the fitted rotation, the apex where blue meets
-/// green (else kept consistent with the lines that were fitted), the scale from red.
-fn refined_pose(t: &Template, pose: &Pose, fit: &FitResult) -> Pose {
-    let psi = pose.psi + fit.turn;
-    let line = |e: usize| fit.edges[e].map(|r| r.line);
-    let mut out = Pose { psi, ..*pose };
-    match (line(BLUE), line(GREEN), line(RED)) {
-        (Some(b), Some(g), red) => {
-            if let Some(apex) = b.intersect(&g) {
-                out.apex = apex;
-                if let Some(r) = red {
-                    let s = (r.rho - dot(r.normal, apex)) / t.edges[RED].offset;
-                    if s > 0.0 {
-                        out.scale = s;
-                    }
-                }
-            }
-        }
-        (b, g, Some(r)) => {
-            // One pyramid face and the beam: keep the scale, move the apex onto both lines.
-            let face = b.map(|l| (l, BLUE)).or(g.map(|l| (l, GREEN)));
-            if let Some((l, _)) = face {
-                let shifted = Line {
-                    normal: r.normal,
-                    rho: r.rho - out.scale * t.edges[RED].offset,
-                };
-                if let Some(apex) = l.intersect(&shifted) {
-                    out.apex = apex;
-                }
-            }
-        }
-        _ => {}
-    }
-    out
 }

@@ -235,21 +235,51 @@ pub mod rendered {
     use super::Truth;
     use image::GrayImage;
     use nanoforce::config::{CalibrationConfig, TrackerConfig};
-    use nanoforce::scene::{render_into, Session};
+    use nanoforce::scene::{render, render_into, Segment, Session};
     use nanoforce::vision::{Calibration, Estimate, Tracker};
 
     /// The tracker settings and calibration clicks the session's probe.toml would hold.
-    /// The scene's click generator can put a red click beyond the frame when the beam
-    /// leaves it steeply; a person cannot click there, so such clicks are dropped.
+    /// The scene's click generator can put red clicks beyond the frame when the beam
+    /// leaves it steeply; a person cannot click there, so such clicks are dropped, and
+    /// if fewer than two remain, the person clicks (to within +-0.5 px) at a quarter,
+    /// half and three quarters of the true edge's part in view.
     pub fn tracker_config(session: &Session) -> TrackerConfig {
         let clicks = session.clicks();
         let (w, h) = (
             session.reference.width as f64,
             session.reference.height as f64,
         );
-        let inside = |v: Vec<[f64; 2]>| -> Vec<[f64; 2]> {
-            v.into_iter()
-                .filter(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0)
+        let inside =
+            |p: &[f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
+        let (_, truth) = render(&session.reference);
+        let edges = truth.edges.expect("the reference shows the probe");
+        let fix = |v: Vec<[f64; 2]>, seg: Segment, k: u64| -> Vec<[f64; 2]> {
+            let kept: Vec<[f64; 2]> = v.into_iter().filter(inside).collect();
+            if kept.len() >= 2 {
+                return kept;
+            }
+            let at = |t: f64| {
+                [
+                    seg.from[0] + t * (seg.to[0] - seg.from[0]),
+                    seg.from[1] + t * (seg.to[1] - seg.from[1]),
+                ]
+            };
+            let ts: Vec<f64> = (0..=100)
+                .map(|i| i as f64 / 100.0)
+                .filter(|&t| inside(&at(t)))
+                .collect();
+            let (t0, t1) = (ts[0], ts[ts.len() - 1]);
+            [0.25, 0.5, 0.75]
+                .iter()
+                .enumerate()
+                .map(|(i, f)| {
+                    let p = at(t0 + f * (t1 - t0));
+                    let j = ((k * 7 + i as u64 * 3) % 11) as f64 / 10.0 - 0.5;
+                    [
+                        (10.0 * (p[0] + j)).round() / 10.0,
+                        (10.0 * (p[1] - j)).round() / 10.0,
+                    ]
+                })
                 .collect()
         };
         TrackerConfig {
@@ -257,9 +287,9 @@ pub mod rendered {
             window_deg: session.window_deg,
             calibration: Some(CalibrationConfig {
                 reference_image: "reference.png".into(),
-                red: inside(clicks.red),
-                blue: inside(clicks.blue),
-                green: inside(clicks.green),
+                red: fix(clicks.red, edges.red, 1),
+                blue: fix(clicks.blue, edges.blue, 2),
+                green: fix(clicks.green, edges.green, 3),
             }),
         }
     }
