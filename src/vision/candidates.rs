@@ -5,7 +5,7 @@
 
 use super::edges::EdgePoint;
 use super::geometry::{along, clip_to_rect, dot, scale, sub, wrap_pi};
-use super::hough::Peak;
+use super::hough::{Peak, PEAKS_PER_EDGE};
 
 /// Inlier band half-width around a candidate line, detection pixels.
 const INLIER_PX: f64 = 1.5;
@@ -61,8 +61,11 @@ impl Candidates {
         size: [usize; 2],
     ) {
         self.list.clear();
-        self.prefix
-            .resize(peaks.len().max(1) * (PROFILE_BINS + 1), 0);
+        // Sized for the most peaks there can be: no growth from frame to frame.
+        let most = 3 * PEAKS_PER_EDGE;
+        debug_assert!(peaks.len() <= most);
+        self.list.reserve(most);
+        self.prefix.resize(most * (PROFILE_BINS + 1), 0);
         self.marks.resize(PROFILE_BINS, 0);
         for (slot, peak) in peaks.iter().enumerate() {
             let nu = normal_angles[peak.edge] + peak.psi;

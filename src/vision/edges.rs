@@ -83,6 +83,11 @@ impl EdgeMap {
         self.points.clear();
         self.marked.clear();
         self.stack.clear();
+        // Room for the worst case (every pixel an edge), once per image size: after
+        // that, no frame allocates whatever it shows.
+        self.points.reserve(w * h);
+        self.marked.reserve(w * h);
+        self.stack.reserve(w * h);
         self.noise = pyr.gradient_noise();
         let high = HIGH_SIGMAS * self.noise;
         let low = LOW_SIGMAS * self.noise;

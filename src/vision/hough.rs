@@ -54,6 +54,8 @@ pub struct Hough {
     votes_span: Vec<(usize, usize)>,
     smooth_span: Vec<(usize, usize)>,
     pub peaks: Vec<Peak>,
+    /// Pixels of the detection image (the most edge points there can be).
+    pixels: usize,
     /// Per edge, the indices of the points that voted for it (polarity-compatible).
     pub voters: [Vec<u32>; 3],
 }
@@ -67,6 +69,7 @@ impl Hough {
         window_rad: f64,
         normal_angles: [f64; 3],
     ) {
+        self.pixels = width * height;
         let n_psi = 2 * (window_rad / PSI_STEP_RAD).ceil() as usize + 1;
         let diag = ((width * width + height * height) as f64).sqrt().ceil();
         let n_rho = 2 * diag as usize + 3;
@@ -113,7 +116,11 @@ impl Hough {
             }
             *span = (usize::MAX, 0);
         }
-        self.voters.iter_mut().for_each(Vec::clear);
+        for v in &mut self.voters {
+            v.clear();
+            // Room for every pixel of the image: no growth after warm-up.
+            v.reserve(self.pixels);
+        }
         // Offset so that bins are found by truncation of a positive number.
         let rho_shift = (0.5 - self.rho_min) as f32;
         for (index, p) in points.iter().enumerate() {

@@ -128,6 +128,7 @@ impl Search {
         prior: Option<Prior>,
     ) -> Option<Hypothesis> {
         self.shortlist.clear();
+        self.shortlist.reserve(SHORTLIST);
         let list = &cands.list;
         let n = list.len();
         let size = [edges.width as f64, edges.height as f64];

@@ -175,6 +175,8 @@ impl Refiner {
             (MAX_SAMPLES_PER_EDGE, ITERATIONS)
         };
         self.samples.clear();
+        // Each band is strided down to at most max_samples plus one line's worth.
+        self.samples.reserve(3 * (MAX_SAMPLES_PER_EDGE + 1024));
         let mut frames: [Option<EdgeFrame>; 3] = [None; 3];
         for (e, band) in bands.iter().enumerate() {
             self.ranges[e] = 0..0;
