@@ -31,7 +31,12 @@ pub struct Pyramid {
     scratch_b: Vec<f32>,
     /// Histogram of `grey` (integer levels).
     histogram: [u32; 256],
+    /// Width the buffers were last laid out for.
+    width_seen: usize,
 }
+
+/// Rows of the horizontal pass kept for the vertical one.
+const RING: usize = 5;
 
 impl Default for Pyramid {
     fn default() -> Self {
@@ -46,6 +51,7 @@ impl Default for Pyramid {
             scratch_a: Vec::new(),
             scratch_b: Vec::new(),
             histogram: [0; 256],
+            width_seen: 0,
         }
     }
 }
@@ -64,16 +70,17 @@ impl Pyramid {
         self.factor = factor;
         self.width = width;
         self.height = height;
-        for buf in [
-            &mut self.grey,
-            &mut self.gx,
-            &mut self.gy,
-            &mut self.mag,
-            &mut self.scratch_a,
-            &mut self.scratch_b,
-        ] {
+        let resized = width * height != self.grey.len() || width != self.width_seen;
+        self.width_seen = width;
+        for buf in [&mut self.grey, &mut self.gx, &mut self.gy, &mut self.mag] {
+            if resized {
+                // The gradient leaves a two-pixel border untouched: it must read zero.
+                buf.clear();
+            }
             buf.resize(width * height, 0.0);
         }
+        self.scratch_a.resize(RING * width, 0.0);
+        self.scratch_b.resize(RING * width, 0.0);
         bin_into(
             frame,
             factor as usize,
@@ -82,9 +89,6 @@ impl Pyramid {
             &mut self.grey,
             &mut self.histogram,
         );
-        for v in [&mut self.gx, &mut self.gy, &mut self.mag] {
-            v.iter_mut().for_each(|g| *g = 0.0);
-        }
         self.gradient();
     }
 
@@ -137,65 +141,62 @@ impl Pyramid {
         if w < 5 || h < 5 {
             return;
         }
-        // Horizontal pass: derivative [-1 -2 0 2 1] and smoothing [1 4 6 4 1]. Shifted
-        // slices zipped together vectorise; windows() does not.
+        let norm = 1.0 / 128.0;
         for y in 0..h {
-            let row = &self.grey[y * w..(y + 1) * w];
-            let n = w - 4;
-            let (a, b, c, d, e) = (
-                &row[..n],
-                &row[1..n + 1],
-                &row[2..n + 2],
-                &row[3..n + 3],
-                &row[4..],
-            );
-            let dx = &mut self.scratch_a[y * w + 2..y * w + 2 + n];
-            for ((((o, &a), &b), &d), &e) in dx.iter_mut().zip(a).zip(b).zip(d).zip(e) {
-                *o = 2.0 * (d - b) + (e - a);
-            }
-            let sx = &mut self.scratch_b[y * w + 2..y * w + 2 + n];
-            for (((((o, &a), &b), &c), &d), &e) in sx.iter_mut().zip(a).zip(b).zip(c).zip(d).zip(e)
-            {
-                *o = a + e + 4.0 * (b + d) + 6.0 * c;
+            self.horizontal(y);
+            if y >= 4 {
+                self.vertical(y - 2, norm);
             }
         }
-        // Vertical pass; 1/128 makes both components grey levels per pixel.
-        let norm = 1.0 / 128.0;
-        for y in 2..h - 2 {
-            let rows = |buf: &[f32], dy: usize| -> std::ops::Range<usize> {
-                let _ = buf;
-                (y + dy - 2) * w + 2..(y + dy - 1) * w - 2
-            };
-            let d = &self.scratch_a;
-            let s = &self.scratch_b;
-            let (d0, d1, d2, d3, d4) = (
-                &d[rows(d, 0)],
-                &d[rows(d, 1)],
-                &d[rows(d, 2)],
-                &d[rows(d, 3)],
-                &d[rows(d, 4)],
-            );
-            let (s0, s1, s3, s4) = (
-                &s[rows(s, 0)],
-                &s[rows(s, 1)],
-                &s[rows(s, 3)],
-                &s[rows(s, 4)],
-            );
-            let out = y * w + 2..(y + 1) * w - 2;
-            let gx = &mut self.gx[out.clone()];
-            for (((((o, &a), &b), &c), &dd), &e) in
-                gx.iter_mut().zip(d0).zip(d1).zip(d2).zip(d3).zip(d4)
-            {
-                *o = (a + e + 4.0 * (b + dd) + 6.0 * c) * norm;
-            }
-            let gy = &mut self.gy[out.clone()];
-            for ((((o, &a), &b), &dd), &e) in gy.iter_mut().zip(s0).zip(s1).zip(s3).zip(s4) {
-                *o = (2.0 * (dd - b) + e - a) * norm;
-            }
-            let mag = &mut self.mag[out.clone()];
-            for ((m, &x), &y) in mag.iter_mut().zip(&self.gx[out.clone()]).zip(&self.gy[out]) {
-                *m = (x * x + y * y).sqrt();
-            }
+    }
+
+    /// Horizontal pass of row `y` into its slot of the five-row ring: derivative
+    /// [-1 -2 0 2 1] and smoothing [1 4 6 4 1]. (Shifted slices zipped together
+    /// vectorise; windows() does not. The ring keeps the pass in the L1 cache.)
+    fn horizontal(&mut self, y: usize) {
+        let w = self.width;
+        let row = &self.grey[y * w..(y + 1) * w];
+        let n = w - 4;
+        let (a, b, c, d, e) = (
+            &row[..n],
+            &row[1..n + 1],
+            &row[2..n + 2],
+            &row[3..n + 3],
+            &row[4..],
+        );
+        let slot = (y % RING) * w;
+        let dx = &mut self.scratch_a[slot + 2..slot + 2 + n];
+        for ((((o, &a), &b), &d), &e) in dx.iter_mut().zip(a).zip(b).zip(d).zip(e) {
+            *o = 2.0 * (d - b) + (e - a);
+        }
+        let sx = &mut self.scratch_b[slot + 2..slot + 2 + n];
+        for (((((o, &a), &b), &c), &d), &e) in sx.iter_mut().zip(a).zip(b).zip(c).zip(d).zip(e) {
+            *o = a + e + 4.0 * (b + d) + 6.0 * c;
+        }
+    }
+
+    /// Vertical pass for row `y` from the ring rows `y - 2 ..= y + 2`; `norm` makes both
+    /// components grey levels per pixel.
+    fn vertical(&mut self, y: usize, norm: f32) {
+        let w = self.width;
+        let row = |k: usize| ((y + k - 2) % RING) * w + 2..((y + k - 2) % RING) * w + w - 2;
+        let (d, s) = (&self.scratch_a, &self.scratch_b);
+        let (d0, d1, d2, d3, d4) = (&d[row(0)], &d[row(1)], &d[row(2)], &d[row(3)], &d[row(4)]);
+        let (s0, s1, s3, s4) = (&s[row(0)], &s[row(1)], &s[row(3)], &s[row(4)]);
+        let out = y * w + 2..(y + 1) * w - 2;
+        let gx = &mut self.gx[out.clone()];
+        for (((((o, &a), &b), &c), &dd), &e) in
+            gx.iter_mut().zip(d0).zip(d1).zip(d2).zip(d3).zip(d4)
+        {
+            *o = (a + e + 4.0 * (b + dd) + 6.0 * c) * norm;
+        }
+        let gy = &mut self.gy[out.clone()];
+        for ((((o, &a), &b), &dd), &e) in gy.iter_mut().zip(s0).zip(s1).zip(s3).zip(s4) {
+            *o = (2.0 * (dd - b) + e - a) * norm;
+        }
+        let mag = &mut self.mag[out.clone()];
+        for ((m, &x), &y) in mag.iter_mut().zip(&self.gx[out.clone()]).zip(&self.gy[out]) {
+            *m = (x * x + y * y).sqrt();
         }
     }
 }
