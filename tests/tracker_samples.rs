@@ -20,8 +20,8 @@ fn mixed_sample_in_random_order() {
     let why = format!("{sc:?}\n{}", table(&s.truth, &est));
     assert_eq!(sc.detect_rate, 1.0, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.045, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.14, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.046, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.16, "{why}");
     assert!(sc.angle_err_max_deg <= 0.35, "{why}");
     assert!(sc.tip_err_median_px <= 0.75, "{why}");
 }
@@ -34,9 +34,9 @@ fn sequence_sample_with_and_without_coherence() {
         let sc = score(&s.truth, &est);
         let why = format!("coherence {coherence}: {sc:?}\n{}", table(&s.truth, &est));
         assert_eq!(sc.detect_rate, 1.0, "{why}");
-        assert!(sc.angle_err_median_deg <= 0.026, "{why}");
-        assert!(sc.angle_err_p95_deg <= 0.075, "{why}");
-        assert!(sc.angle_err_max_deg <= 0.12, "{why}");
+        assert!(sc.angle_err_median_deg <= 0.028, "{why}");
+        assert!(sc.angle_err_p95_deg <= 0.07, "{why}");
+        assert!(sc.angle_err_max_deg <= 0.1, "{why}");
         assert!(sc.tip_err_median_px <= 0.6, "{why}");
     }
 }
@@ -72,7 +72,7 @@ fn the_reference_reads_zero_and_clicks_are_refined() {
         let mut tracker = Tracker::new(&s.config.tracker, cal.clone(), None);
         let e = tracker.track(&s.reference);
         let angle = e.angle_deg.expect("the reference is detected");
-        assert!(angle.abs() < 0.003, "{name}: reference reads {angle}");
+        assert!(angle.abs() < 0.005, "{name}: reference reads {angle}");
         let apex = e.apex_px.expect("apex");
         let ref_apex = cal.apex_px();
         assert!(

@@ -118,6 +118,8 @@ pub struct Estimate {
     pub apex_px: Option<[f64; 2]>,
     /// Per edge, indexed by [`Edge::index`].
     pub edges: [Option<EdgeFit>; 3],
+    /// Standard error of `angle_deg` from the fit's noise, degrees.
+    pub angle_sigma_deg: Option<f64>,
     /// Frame pixels per reference pixel.
     pub scale: Option<f64>,
     /// In [0, 1]; `detected` requires it to pass the tracker's threshold.
@@ -136,6 +138,7 @@ impl Estimate {
             force_saturated: false,
             apex_px: None,
             edges: [None; 3],
+            angle_sigma_deg: None,
             scale: None,
             confidence,
             miss: Some(miss),

@@ -33,6 +33,10 @@ const DROP_CONTRAST_RATIO: f64 = 0.4;
 /// Per-edge flags.
 type Vec3Mask = [bool; 3];
 
+/// Blur (pixels) the coarse fit's bands are sized for, at least: SEM frames range from
+/// 0.8 to 1.6 (scene.md).
+const START_BLUR_PX: f64 = 1.4;
+
 /// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
 const CONFIRMED_FRACTION: f64 = 0.5;
 /// The last confident estimate, for coherence.
@@ -50,7 +54,6 @@ pub struct Tracker {
     cantilever: Option<Cantilever>,
     coherence: bool,
     last: Option<Last>,
-    blur: f64,
     pyr: Pyramid,
     edges: EdgeMap,
     hough: Hough,
@@ -69,7 +72,6 @@ impl Tracker {
         Tracker {
             threshold: cfg.threshold,
             window_rad: cfg.window_deg.to_radians(),
-            blur: calibration.blur_px(),
             calibration,
             cantilever,
             coherence: true,
@@ -193,11 +195,16 @@ impl Tracker {
             std::array::from_fn(|e| b[e].filter(|_| keep[e]))
         };
         let prior = bend_prior(t, &pose, self.cantilever, 0.0);
-        let first = only(bands(t, &pose, size, self.blur, prior), &keep);
-        let fit = self.refiner.fit(frame, &first, true, self.blur, true)?;
+        // Every frame starts from the same blur guess (wide enough for the blurriest
+        // frames; the coarse pass measures it): nothing carries over from the frame
+        // before, so the result does not depend on the order of frames.
+        let blur0 = self.calibration.blur_px().max(START_BLUR_PX);
+        let first = only(bands(t, &pose, size, blur0, prior), &keep);
+        let fit = self.refiner.fit(frame, &first, true, blur0, true)?;
+        let blur = fit.blur.clamp(0.5, 3.0);
         let pose = refined_pose(t, &pose, &fit);
         let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
-        let mut bands = only(bands(t, &pose, size, self.blur, prior), &keep);
+        let mut bands = only(bands(t, &pose, size, blur, prior), &keep);
         let mut fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
         let ratio = |fit: &FitResult, e: usize| {
             fit.edges[e].map_or(0.0, |r| {
@@ -263,7 +270,6 @@ impl Tracker {
                 contrast: r.contrast,
             });
         }
-        self.blur = fit.blur.clamp(0.5, 3.0);
         let angle_deg = screen_deg_from_image_rad(pose.psi);
         let force = self.cantilever.map(|c| c.force_nn(angle_deg));
         Estimate {
@@ -273,6 +279,7 @@ impl Tracker {
             force_saturated: force.is_some_and(|f| f.saturated),
             apex_px: Some(pose.apex),
             edges,
+            angle_sigma_deg: Some(fit.turn_sigma.to_degrees()),
             scale: Some(pose.scale),
             confidence,
             miss: None,

@@ -84,7 +84,11 @@ impl Refiner {
             };
             if frames[e].is_none() {
                 ne.fixed[P_OFFSET + e] = true;
-                ne.fixed[P_TURN + e] = true;
+                // An absent edge's own rotation is held; the shared one (slot 0 in
+                // tracking mode) belongs to every edge.
+                if !shared {
+                    ne.fixed[P_TURN + e] = true;
+                }
                 for k in 0..PHOTO {
                     ne.fixed[P_PHOTO + PHOTO * e + k] = true;
                 }

@@ -31,7 +31,6 @@ const MAX_SAMPLES_PER_EDGE_COARSE: usize = 400;
 /// other pixel.
 const ITERATIONS: usize = 5;
 const ITERATIONS_COARSE: usize = 3;
-const SUBSAMPLED_ITERATIONS: usize = 1;
 /// Converged when a step moves the rotation and every offset less than this.
 const DONE_TURN_RAD: f64 = 5e-6;
 const DONE_OFFSET_PX: f64 = 5e-3;
@@ -63,6 +62,9 @@ pub struct Band {
     /// Standard deviation of the prior on the bend around `bend0` (infinite: no prior).
     pub bend_sigma: f64,
 }
+
+/// The outer part of a band (pixels) where only every other pixel is fitted.
+const LEVEL_ONLY_PX: f64 = 2.0;
 
 /// The band that may carry a bend (the beam edge).
 const RED_BAND: usize = 0;
@@ -169,10 +171,12 @@ impl Refiner {
         coarse: bool,
     ) -> Option<FitResult> {
         let half_width = half_width(blur0);
-        let (max_samples, iterations_max) = if coarse {
-            (MAX_SAMPLES_PER_EDGE_COARSE, ITERATIONS_COARSE)
+        // The coarse pass starts far from the solution: its first iteration runs on
+        // every other pixel. The final pass starts from the coarse lines.
+        let (max_samples, iterations_max, subsampled) = if coarse {
+            (MAX_SAMPLES_PER_EDGE_COARSE, ITERATIONS_COARSE, 1)
         } else {
-            (MAX_SAMPLES_PER_EDGE, ITERATIONS)
+            (MAX_SAMPLES_PER_EDGE, ITERATIONS, 0)
         };
         self.samples.clear();
         // Each band is strided down to at most max_samples plus one line's worth.
@@ -209,7 +213,7 @@ impl Refiner {
         self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
         for iter in 0..iterations_max {
             // The first iterations, far from the solution, on every other pixel.
-            let step = if iter < SUBSAMPLED_ITERATIONS { 2 } else { 1 };
+            let step = if iter < subsampled { 2 } else { 1 };
             let mut ne = self.normal_equations(&frames, &x, &noise, shared, step);
             if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
                 // The physics' expectation of the bend as one more observation, weighted
@@ -222,13 +226,13 @@ impl Refiner {
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
-            if iter <= SUBSAMPLED_ITERATIONS {
+            if iter <= subsampled {
                 self.reject_chunks();
             }
             let done = (P_TURN..P_TURN + 3).all(|k| step[k].abs() < DONE_TURN_RAD)
                 && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_OFFSET_PX);
             last = Some(ne);
-            if done && iter > SUBSAMPLED_ITERATIONS {
+            if done && iter > subsampled {
                 break;
             }
         }
@@ -256,6 +260,7 @@ impl Refiner {
             return 0;
         }
         let across = half_width / n[j].abs();
+        let inner = (half_width - LEVEL_ONLY_PX) / n[j].abs();
         let per_line = (2.0 * across + 1.0).max(1.0);
         let lines = hi - lo + 1.0;
         let stride = ((lines * per_line) / max_samples as f64).ceil().max(1.0) as usize;
@@ -286,6 +291,11 @@ impl Refiner {
             let c0 = (centre - across).ceil().max(1.0) as i64;
             let c1 = (centre + across).floor().min(limit) as i64;
             for c in c0..=c1 {
+                // Pixels more than a couple of blurs from the edge only tell the levels:
+                // every other one (a checkerboard) is plenty for that.
+                if (c as f64 - centre).abs() > inner && (a + c) % 2 != 0 {
+                    continue;
+                }
                 let (px, py) = if horizontal { (a, c) } else { (c, a) };
                 let value = raw[py as usize * width + px as usize];
                 let local = (((a as f64 - lo) / chunk_lines) as usize).min(CHUNKS_PER_EDGE - 1);
