@@ -249,23 +249,6 @@ fn calibration_finds_the_true_edges_and_the_reference_reads_zero() {
     }
 }
 
-#[test]
-#[ignore]
-fn dev_write_suite_session() {
-    let var = |k: &str| std::env::var(k).unwrap();
-    let sessions = scene::suite(
-        var("SEED").parse().unwrap(),
-        var("SESSIONS").parse().unwrap(),
-        var("PER").parse().unwrap(),
-    );
-    let i: usize = var("SESSION").parse().unwrap();
-    sessions[i]
-        .write(std::path::Path::new(&var("OUT")), scene::FrameFormat::Png)
-        .unwrap();
-    let (_, truth) = render(&sessions[i].reference);
-    println!("{:?}", truth.edges);
-}
-
 /// CPU time of this thread, seconds (10 ms ticks; immune to other processes' load).
 fn thread_cpu_s() -> f64 {
     let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
@@ -315,25 +298,4 @@ fn cpu_time_per_frame() {
             println!("{width}x{} {name}: {ms:.2} ms CPU per frame", setup.height);
         }
     }
-}
-
-#[test]
-#[ignore]
-fn dev_explain_suite_frame() {
-    let var = |k: &str| std::env::var(k).unwrap();
-    let sessions = scene::suite(var("SEED").parse().unwrap(), 12, 50);
-    let (i, k): (usize, usize) = (
-        var("SESSION").parse().unwrap(),
-        var("FRAME").parse().unwrap(),
-    );
-    let (cfg, cal) = rendered::calibrate(&sessions[i]);
-    let mut tracker = Tracker::new(&cfg, cal, None);
-    tracker.set_coherence(false);
-    let (img, truth) = render(&sessions[i].frames[k]);
-    let e = tracker.track(&img);
-    println!(
-        "truth {:.3} apex {:.1},{:.1}\n{e:#?}",
-        truth.angle_deg, truth.tip_x, truth.tip_y
-    );
-    img.save("/tmp/explain.png").unwrap();
 }
