@@ -11,9 +11,12 @@
 //! - `hypothesis`: the rigid-tip search: pairs and triples of lines that agree on one
 //!   rotation and form the reference triangle at some scale, scored by how well they
 //!   cover the predicted segments (a clutter line cannot win an edge on its own);
+//! - `bands`: which stretch of each edge the grey-level fit uses (shared with calibration);
 //! - `refine`: sub-pixel, sub-0.1 degree fit of one shared rotation on the full-resolution
 //!   grey levels, with a bend term for the curved beam edge;
-//! - `tracker`: the per-frame driver, verification, confidence and coherence;
+//! - `verify`: is it the tip (contrast of every edge in view, a bright pyramid, a
+//!   precise rotation), and the confidence;
+//! - `tracker`: the per-frame driver and coherence;
 //! - `calibration`: the template learned from the reference image and clicked pixels;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
 //!

@@ -3,16 +3,22 @@
 //! Thresholding and edge maps throw away where, inside a pixel, an edge lies; the grey
 //! levels keep it. Around each found edge a band of pixels is fitted with a blurred step
 //!
-//!     I(p) = level + slope * u + contrast * Phi(d(p) / blur),
+//!     I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur),
 //!     d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
 //!
-//! (`Phi` the normal CDF, `u` the position along the edge, for slow shading), by robust
-//! (Huber) Gauss-Newton. In tracking mode one rotation `psi` is shared by all edges,
-//! which is what a rigid tip means; in calibration mode each edge turns on its own.
-//! The beam edge is curved along the elastica: its offset from the free-end tangent
-//! grows as the cube of the distance `w` from the free end (the bending moment grows
-//! linearly from zero there), so a cubic term lets a long stretch of it pin down the
-//! end tangent instead of biasing it.
+//! (`Phi` the normal CDF, `u` the position along the edge, for slow shading and the
+//! probe's brightness ramp), by robust (Huber) Gauss-Newton. In tracking mode one
+//! rotation `psi` is shared by all edges, which is what a rigid tip means; in
+//! calibration mode each edge turns on its own. The beam edge is straight along the
+//! rigid block at its end and curves behind it along the elastica: its offset from the
+//! free-end tangent grows as the cube of the distance `w` behind the block (the bending
+//! moment grows linearly from there), so a cubic term, with a prior from the exact
+//! elastica (`bands::bend_prior`), lets a long stretch of beam pin the tangent down
+//! instead of biasing it. Stretches whose residuals stand out (a particle on the edge)
+//! are left out.
+//!
+//! `kernel` is the inner loop, `gauss` the tabulated normal CDF, `solve` the small
+//! dense algebra.
 
 use image::GrayImage;
 
