@@ -3,8 +3,10 @@
 //! Thresholding and edge maps throw away where, inside a pixel, an edge lies; the grey
 //! levels keep it. Around each found edge a band of pixels is fitted with a blurred step
 //!
-//!     I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur),
-//!     d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
+//! ```text
+//! I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur),
+//! d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
+//! ```
 //!
 //! (`Phi` the normal CDF, `u` the position along the edge, for slow shading and the
 //! probe's brightness ramp), by robust (Huber) Gauss-Newton. In tracking mode one
