@@ -21,5 +21,6 @@ pub mod daemon;
 pub mod hw;
 pub mod model;
 pub mod scene;
+pub mod session;
 pub mod sim;
 pub mod vision;

@@ -4,7 +4,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod calibrate;
 mod model;
+pub mod replay;
+pub mod run;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
 #[derive(Debug, Parser)]
@@ -26,6 +29,12 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run the real-time teleoperation daemon (default: the built-in simulated lab).
+    Run(run::RunArgs),
+    /// Track the tip in a recorded session's frames and write the results CSV.
+    Replay(replay::ReplayArgs),
+    /// Refine clicked tip edges on a reference frame; print the calibration block.
+    Calibrate(calibrate::CalibrateArgs),
     Model(model::ModelArgs),
 }
 
@@ -33,6 +42,9 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     init_logging();
     match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Replay(args) => replay::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Model(args) => model::run(args),
     }
 }

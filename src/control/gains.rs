@@ -85,7 +85,7 @@ impl Default for TeleopGains {
         TeleopGains {
             rate_hz: 1000.0,
             deadband_mm: Vector3::repeat(2.0),
-            gain_um_per_s_per_mm: Vector3::repeat(0.5),
+            gain_um_per_s_per_mm: Vector3::repeat(1.0),
             speed_limit_um_per_s: Vector3::repeat(20.0),
             stage_from_haptic: Matrix3::identity(),
             spring_n_per_mm: Vector3::repeat(0.05),

@@ -13,6 +13,7 @@
 //! the wiring around them.
 pub mod config;
 pub mod haptic_loop;
+pub mod lab;
 pub mod notify;
 pub mod pipeline;
 pub mod rt;

@@ -164,6 +164,16 @@ fn centreline_is_symmetric_and_saturates() {
     assert_eq!(centreline(2.0, 0.5), centreline(MAX_PHI0_RAD, 0.5));
     assert_eq!(centreline(0.3, 1.5), centreline(0.3, 1.0));
     assert_eq!(centreline(0.0, 0.25), [0.25, 0.0]);
+    // Tiny slopes: no underflow trouble, the linear-theory shape y = alpha s^2 (3 - s) / 6.
+    for phi0 in [1e-300, 1e-12] {
+        let [x, y] = centreline(phi0, 0.5);
+        let alpha = 2.0 * phi0;
+        assert!((x - 0.5).abs() < 1e-15, "{phi0}: x {x}");
+        assert!(
+            (y / (alpha * 0.25 * 2.5 / 6.0) - 1.0).abs() < 1e-12,
+            "{phi0}: y {y}"
+        );
+    }
     assert!(centreline(f64::NAN, 0.5).iter().all(|v| v.is_nan()));
     assert!(centreline(0.3, f64::NAN).iter().all(|v| v.is_nan()));
     assert!(slope_rad(f64::NAN, 0.5).is_nan());

@@ -130,3 +130,72 @@ fn interpolation_step(a: f64, b: f64, c: f64, fa: f64, fb: f64, fc: f64, half: f
         (p, (q - 1.0) * (r - 1.0) * (s - 1.0))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::exact;
+    use proptest::prelude::*;
+
+    #[test]
+    fn limits_are_the_values_at_89_degrees() {
+        let e = exact(MAX_PHI0_RAD).unwrap();
+        assert_eq!(max_alpha(), e.alpha);
+        assert_eq!(max_delta_over_l(), e.delta_over_l);
+        assert!((max_alpha() - 27.524_309_308_362_2).abs() < 1e-12);
+        assert_eq!(phi0_from_alpha(max_alpha()), Ok(MAX_PHI0_RAD));
+        assert!((phi0_from_deflection(-max_delta_over_l()).unwrap() + MAX_PHI0_RAD).abs() < 1e-15);
+    }
+
+    #[test]
+    fn out_of_range_requests_are_errors() {
+        for alpha in [30.0, -1e9, f64::NAN, f64::INFINITY] {
+            let err = phi0_from_alpha(alpha).unwrap_err();
+            assert!(matches!(err, ModelError::LoadOutOfRange { .. }), "{err}");
+        }
+        let msg = phi0_from_deflection(0.95).unwrap_err().to_string();
+        assert!(
+            msg.contains("delta/L = 0.95") && msg.contains("89 deg"),
+            "{msg}"
+        );
+        assert_eq!(
+            phi0_from_alpha(-0.0).map(f64::to_bits),
+            Ok((-0.0f64).to_bits())
+        );
+    }
+
+    #[test]
+    fn tiny_loads_and_deflections_keep_relative_precision() {
+        for phi0 in [1e-300, 1e-100, 1e-12, 1e-6] {
+            let e = exact(phi0).unwrap();
+            let from_alpha = phi0_from_alpha(e.alpha).unwrap();
+            let from_delta = phi0_from_deflection(e.delta_over_l).unwrap();
+            assert!(
+                (from_alpha / phi0 - 1.0).abs() < 1e-15,
+                "{phi0}: {from_alpha}"
+            );
+            assert!(
+                (from_delta / phi0 - 1.0).abs() < 1e-15,
+                "{phi0}: {from_delta}"
+            );
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn inverses_round_trip(phi0 in -MAX_PHI0_RAD..=MAX_PHI0_RAD) {
+            let e = exact(phi0).unwrap();
+            let from_alpha = phi0_from_alpha(e.alpha).unwrap();
+            let from_delta = phi0_from_deflection(e.delta_over_l).unwrap();
+            prop_assert!((from_alpha - phi0).abs() <= 1e-14 * phi0.abs(), "{} vs {}", from_alpha, phi0);
+            prop_assert!((from_delta - phi0).abs() <= 1e-14 * phi0.abs(), "{} vs {}", from_delta, phi0);
+        }
+
+        #[test]
+        fn forward_of_inverse_is_identity(alpha in -27.5..27.5f64) {
+            let phi0 = phi0_from_alpha(alpha).unwrap();
+            let back = exact(phi0).unwrap().alpha;
+            prop_assert!((back - alpha).abs() <= 1e-14 * alpha.abs(), "{} vs {}", back, alpha);
+        }
+    }
+}

@@ -22,6 +22,16 @@ impl Blur {
         self.vertical(image, width, height);
     }
 
+    /// Reserves room for rows `width` wide and blurs up to `max_sigma_px`, so that later
+    /// calls within those bounds do not allocate.
+    pub fn reserve(&mut self, width: usize, max_sigma_px: f64) {
+        let radius = (3.0 * max_sigma_px).ceil().max(1.0) as usize;
+        let grow = |v: &mut Vec<f32>, n: usize| v.reserve(n.saturating_sub(v.len()));
+        grow(&mut self.kernel, 2 * radius + 1);
+        grow(&mut self.padded, width + 2 * radius);
+        grow(&mut self.scratch, (radius + 1) * width);
+    }
+
     fn make_kernel(&mut self, sigma: f64) {
         let radius = (3.0 * sigma).ceil().max(1.0) as i64;
         self.kernel.clear();

@@ -47,16 +47,14 @@ impl Shading {
         self.cell = SHADING_CELL_PX * w / 640.0;
         self.cols = (w / self.cell).ceil() as usize + 2;
         self.rows = (h / self.cell).ceil() as usize + 2;
-        let blobs: Vec<[f64; 4]> = (0..SHADING_BLOBS)
-            .map(|_| {
-                [
-                    rng.uniform(-0.2, 1.2) * w,
-                    rng.uniform(-0.2, 1.2) * h,
-                    rng.uniform(0.15, 0.4) * w,
-                    rng.sign() * rng.uniform(0.5, 1.0),
-                ]
-            })
-            .collect();
+        let blobs: [[f64; 4]; SHADING_BLOBS] = std::array::from_fn(|_| {
+            [
+                rng.uniform(-0.2, 1.2) * w,
+                rng.uniform(-0.2, 1.2) * h,
+                rng.uniform(0.15, 0.4) * w,
+                rng.sign() * rng.uniform(0.5, 1.0),
+            ]
+        });
         self.values.clear();
         for j in 0..self.rows {
             for i in 0..self.cols {
@@ -116,47 +114,55 @@ impl Shading {
     }
 }
 
-/// Draws `spec.look.particles` particles into `out`.
+/// Draws `spec.look.particles` particles into `out`, on the background (as in the
+/// public samples, the substrate hides what lies behind it).
 pub fn particles(spec: &FrameSpec, rng: &mut Rng, out: &mut Vec<Particle>) {
     let scale = f64::from(spec.width) / 640.0;
     out.clear();
     for _ in 0..spec.look.particles {
         out.push(Particle {
-            centre: [
-                rng.uniform(0.0, f64::from(spec.width)),
-                rng.uniform(0.0, f64::from(spec.height)),
-            ],
+            centre: background_point(spec, rng),
             radius: 0.5 * rng.uniform(4.0, 30.0) * scale,
             level: (spec.look.background + rng.uniform(50.0, 165.0)).min(250.0),
         });
     }
 }
 
-/// Draws `spec.look.scratches` scratches into `out`.
+/// Draws `spec.look.scratches` scratches into `out`, centred on the background.
 pub fn scratches(spec: &FrameSpec, rng: &mut Rng, out: &mut Vec<Scratch>) {
     let scale = f64::from(spec.width) / 640.0;
     out.clear();
     for _ in 0..spec.look.scratches {
-        let centre = [
-            rng.uniform(0.0, f64::from(spec.width)),
-            rng.uniform(0.0, f64::from(spec.height)),
-        ];
+        let centre = background_point(spec, rng);
         let half = 0.5 * rng.uniform(80.0, 450.0) * scale;
         let (s, c) = rng.uniform(0.0, std::f64::consts::PI).sin_cos();
         out.push(Scratch {
             from: [centre[0] - half * c, centre[1] - half * s],
             to: [centre[0] + half * c, centre[1] + half * s],
             width: rng.uniform(1.5, 4.0) * scale,
-            contrast: rng.uniform(20.0, 65.0),
+            contrast: rng.uniform(25.0, 75.0),
         });
     }
 }
 
-/// The substrate as a polygon: everything below a straight edge `gap` below the apex,
-/// tilted by `substrate_tilt_deg`, reaching well beyond the frame.
-pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
+/// A uniformly random pixel position not on the substrate (a few tries, then anywhere).
+fn background_point(spec: &FrameSpec, rng: &mut Rng) -> [f64; 2] {
+    let mut p = [0.0; 2];
+    for _ in 0..8 {
+        p = [
+            rng.uniform(0.0, f64::from(spec.width)),
+            rng.uniform(0.0, f64::from(spec.height)),
+        ];
+        if spec.look.substrate.is_none() || substrate_depth(spec, p) < 0.0 {
+            break;
+        }
+    }
+    p
+}
+
+/// The substrate's edge: a point on it and its downward normal.
+fn substrate_edge(spec: &FrameSpec) -> ([f64; 2], [f64; 2], [f64; 2]) {
     let tilt = spec.substrate_tilt_deg.to_radians();
-    // Edge direction (screen, CCW tilt) and its downward normal.
     let along = [tilt.cos(), -tilt.sin()];
     let down = [tilt.sin(), tilt.cos()];
     let gap_px = spec.substrate_gap_um * spec.px_per_um();
@@ -164,6 +170,19 @@ pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
         spec.apex_px[0] + gap_px * down[0],
         spec.apex_px[1] + gap_px * down[1],
     ];
+    (on_edge, along, down)
+}
+
+/// How far below the substrate's edge `p` lies, pixels (negative above it).
+fn substrate_depth(spec: &FrameSpec, p: [f64; 2]) -> f64 {
+    let (on_edge, _, down) = substrate_edge(spec);
+    (p[0] - on_edge[0]) * down[0] + (p[1] - on_edge[1]) * down[1]
+}
+
+/// The substrate as a polygon: everything below a straight edge `gap` below the apex,
+/// tilted by `substrate_tilt_deg`, reaching well beyond the frame.
+pub fn substrate_polygon(spec: &FrameSpec, out: &mut Vec<[f64; 2]>) {
+    let (on_edge, along, down) = substrate_edge(spec);
     let reach = 4.0 * f64::from(spec.width.max(spec.height));
     out.clear();
     for (a, d) in [(-reach, 0.0), (reach, 0.0), (reach, reach), (-reach, reach)] {
@@ -195,5 +214,45 @@ pub fn disc_polygon(p: &Particle, out: &mut Vec<[f64; 2]>) {
     for k in 0..n {
         let (s, c) = (std::f64::consts::TAU * k as f64 / n as f64).sin_cos();
         out.push([p.centre[0] + p.radius * c, p.centre[1] + p.radius * s]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::spec::Style;
+
+    #[test]
+    fn clutter_lies_on_the_background_not_the_substrate() {
+        let mut spec = FrameSpec::new(Style::Harsh, 0.0, 1);
+        spec.look.particles = 400;
+        spec.substrate_tilt_deg = 4.0;
+        let mut out = Vec::new();
+        particles(&spec, &mut Rng::new(5), &mut out);
+        let on_substrate = out
+            .iter()
+            .filter(|p| substrate_depth(&spec, p.centre) > 0.0)
+            .count();
+        // Eight tries each: only a tiny share may land on the substrate.
+        assert!(on_substrate <= 4, "{on_substrate} of 400");
+        assert!(out.iter().all(|p| (2.0..=15.0).contains(&p.radius)));
+    }
+
+    #[test]
+    fn shading_spans_background_plus_minus_amplitude() {
+        let spec = FrameSpec::new(Style::Clean, 0.0, 9);
+        let mut shading = Shading::default();
+        shading.generate(&spec, &mut Rng::new(3));
+        let (w, h) = (spec.width as usize, spec.height as usize);
+        let mut canvas = vec![0.0f32; w * h];
+        shading.fill(&mut canvas, w, &mut Vec::new());
+        let lo = canvas.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = canvas.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let (b, a) = (spec.look.background as f32, spec.look.shading as f32);
+        assert!(lo >= b - a - 1e-3 && hi <= b + a + 1e-3, "{lo}..{hi}");
+        assert!(hi - lo > a, "visible shading: {lo}..{hi}");
+        // Smooth: neighbouring pixels differ by a small fraction of a grey level.
+        let step = canvas.windows(2).map(|p| (p[1] - p[0]).abs()).take(w - 1);
+        assert!(step.fold(0.0f32, f32::max) < 0.5);
     }
 }

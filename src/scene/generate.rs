@@ -24,9 +24,9 @@ pub fn varied_look(style: Style, rng: &mut Rng) -> Look {
     let mut look = style.look();
     let (particles, scratches) = match style {
         Style::Clean => ((1, 4), (0, 0)),
-        Style::Clutter => ((8, 16), (3, 7)),
+        Style::Clutter => ((6, 14), (3, 7)),
         Style::Noisy => ((2, 7), (0, 2)),
-        Style::Harsh => ((10, 20), (3, 7)),
+        Style::Harsh => ((14, 24), (4, 8)),
     };
     look.particles = rng.int(particles.0, particles.1);
     look.scratches = rng.int(scratches.0, scratches.1);
@@ -46,7 +46,10 @@ pub fn random_frame(
     let mut spec = setup.frame(style, angle_deg, magnification, rng.next_u64());
     spec.look = varied_look(style, rng);
     spec.apex_px = random_apex(setup, rng);
-    spec.substrate_gap_um = rng.uniform(-1.5, 5.5);
+    // The public samples keep the substrate within a few dozen pixels of the apex at
+    // every magnification.
+    let gap_px = rng.uniform(-25.0, 57.0) * f64::from(setup.width) / 640.0;
+    spec.substrate_gap_um = gap_px / spec.px_per_um();
     spec.substrate_tilt_deg = rng.uniform(-6.0, 6.0);
     spec.blank = rng.chance(BLANK_FRACTION);
     spec

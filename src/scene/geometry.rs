@@ -163,89 +163,137 @@ pub fn probe_outline(
     height: u32,
     outline: &mut Vec<[f64; 2]>,
 ) -> Edges {
-    let ppu = pose.px_per_um;
-    let t_px = geometry.thickness_um * ppu;
-    let h_px = geometry.pyramid_height_um * ppu;
-    let (back_um, front_um) = geometry.face_runs_um();
-    let (back_px, front_px) = (back_um * ppu, front_um * ppu);
-    let length_px = geometry.length_um * ppu;
     let phi0 = pose.angle_deg.to_radians();
     let (d, side) = base_direction(pose);
-    let beam = Centreline::new(phi0);
-    // Frame of the rigid block at the end of the elastica.
-    let t_end = rotate(d, phi0);
-    let up_end = scale(ccw_normal(t_end), side);
-    // Block corners relative to the centreline's end point.
-    let b = scale(up_end, -0.5 * t_px);
-    let a = add(add(b, scale(t_end, back_px)), scale(up_end, -h_px));
-    let g = add(b, scale(t_end, back_px + front_px));
-    let e_low = add(g, scale(t_end, geometry.overhang_um * ppu));
-    let e_up = add(e_low, scale(up_end, t_px));
-    let u_end = scale(up_end, 0.5 * t_px);
-    // Place the beam so the apex lands on the requested pixel.
-    let end = sub(pose.apex_px, a);
-    let c1 = beam.point(1.0);
-    let clamp = sub(
-        end,
-        scale(add(scale(d, c1[0]), scale(ccw_normal(d), c1[1])), length_px),
-    );
-    let at = |s: f64| -> ([f64; 2], [f64; 2]) {
-        let (p, slope) = if s >= 0.0 {
-            let c = beam.point(s);
-            (
-                add(
-                    clamp,
-                    scale(add(scale(d, c[0]), scale(ccw_normal(d), c[1])), length_px),
-                ),
-                beam.slope_rad(s),
-            )
-        } else {
-            (add(clamp, scale(d, s * length_px)), 0.0)
-        };
-        (p, scale(ccw_normal(rotate(d, slope)), side * 0.5 * t_px))
-    };
-    // Arc needed to leave the frame from the end, with margin.
-    let far = [
-        [0.0, 0.0],
-        [f64::from(width), 0.0],
-        [0.0, f64::from(height)],
-        [f64::from(width), f64::from(height)],
-    ]
-    .iter()
-    .map(|corner| dist(*corner, end))
-    .fold(0.0, f64::max);
-    let arc_px = 1.2 * far + 2.0 * t_px + 20.0;
+    let block = Block::new(geometry, pose.px_per_um, rotate(d, phi0), side);
+    // Place the beam so that the apex lands on the requested pixel.
+    let end = sub(pose.apex_px, block.apex);
+    let beam = Beam::new(geometry, pose.px_per_um, phi0, d, side, end);
+    let far = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]
+        .iter()
+        .map(|c| dist([c[0] * f64::from(width), c[1] * f64::from(height)], end))
+        .fold(0.0, f64::max);
+    // Arc needed to leave the frame from the end, with margin; s for step i of n.
+    let arc_px = 1.2 * far + 2.0 * beam.half_thickness_px + 20.0;
     let steps = (arc_px / BEAM_STEP_PX).ceil().max(2.0) as usize;
+    let s_at = |i: usize| 1.0 - arc_px / beam.length_px * (1.0 - i as f64 / steps as f64);
     outline.clear();
-    // Upper face from far back to the end of the elastica, then around the block.
-    for i in 0..=steps {
-        let s = 1.0 - arc_px / length_px * (1.0 - i as f64 / steps as f64);
-        let (p, half_up) = at(s);
-        outline.push(add(p, half_up));
-    }
-    debug_assert!(dist(*outline.last().unwrap_or(&[0.0; 2]), add(end, u_end)) < 1e-6);
-    for corner in [e_up, e_low, g, a, b] {
+    // Upper face from far back to the end of the elastica, around the block, and the
+    // lower face back from the pyramid's base.
+    outline.extend((0..=steps).map(|i| beam.face(s_at(i), 1.0)));
+    for corner in [
+        block.end_upper,
+        block.end_lower,
+        block.front_base,
+        block.apex,
+        block.back_base,
+    ] {
         outline.push(add(end, corner));
     }
-    // Lower face back from the pyramid's base.
-    for i in (0..steps).rev() {
-        let s = 1.0 - arc_px / length_px * (1.0 - i as f64 / steps as f64);
-        let (p, half_up) = at(s);
-        outline.push(sub(p, half_up));
-    }
+    outline.extend((0..steps).rev().map(|i| beam.face(s_at(i), -1.0)));
+    let at = |p: [f64; 2]| add(end, p);
     Edges {
         red: Segment {
-            from: add(end, u_end),
-            to: add(end, e_up),
+            from: at(block.upper_start),
+            to: at(block.end_upper),
         },
         blue: Segment {
-            from: add(end, b),
-            to: add(end, a),
+            from: at(block.back_base),
+            to: at(block.apex),
         },
         green: Segment {
-            from: add(end, a),
-            to: add(end, g),
+            from: at(block.apex),
+            to: at(block.front_base),
         },
+    }
+}
+
+/// The rigid end block (pyramid plus overhang), corners relative to the end of the
+/// elastica's centreline, in pixels.
+struct Block {
+    /// Upper face at the end of the elastica, where the straight block face starts.
+    upper_start: [f64; 2],
+    back_base: [f64; 2],
+    apex: [f64; 2],
+    front_base: [f64; 2],
+    end_lower: [f64; 2],
+    end_upper: [f64; 2],
+}
+
+impl Block {
+    /// `tangent`: the beam's direction at its end; `side` turns the CCW normal "up".
+    fn new(geometry: &ProbeGeometry, ppu: f64, tangent: [f64; 2], side: f64) -> Block {
+        let up = scale(ccw_normal(tangent), side);
+        let t_px = geometry.thickness_um * ppu;
+        let (back_um, front_um) = geometry.face_runs_um();
+        let back_base = scale(up, -0.5 * t_px);
+        let apex = add(
+            add(back_base, scale(tangent, back_um * ppu)),
+            scale(up, -geometry.pyramid_height_um * ppu),
+        );
+        let front_base = add(back_base, scale(tangent, (back_um + front_um) * ppu));
+        let end_lower = add(front_base, scale(tangent, geometry.overhang_um * ppu));
+        Block {
+            upper_start: scale(up, 0.5 * t_px),
+            back_base,
+            apex,
+            front_base,
+            end_lower,
+            end_upper: add(end_lower, scale(up, t_px)),
+        }
+    }
+}
+
+/// The bent beam placed on screen: the elastica from the clamp, scaled to pixels.
+struct Beam {
+    centreline: Centreline,
+    clamp: [f64; 2],
+    direction: [f64; 2],
+    side: f64,
+    length_px: f64,
+    half_thickness_px: f64,
+}
+
+impl Beam {
+    /// The beam whose centreline ends at `end` (pixels), undeformed `direction`.
+    fn new(
+        geometry: &ProbeGeometry,
+        ppu: f64,
+        phi0: f64,
+        direction: [f64; 2],
+        side: f64,
+        end: [f64; 2],
+    ) -> Beam {
+        let centreline = Centreline::new(phi0);
+        let length_px = geometry.length_um * ppu;
+        let c1 = centreline.point(1.0);
+        let reach = add(scale(direction, c1[0]), scale(ccw_normal(direction), c1[1]));
+        Beam {
+            centreline,
+            clamp: sub(end, scale(reach, length_px)),
+            direction,
+            side,
+            length_px,
+            half_thickness_px: 0.5 * geometry.thickness_um * ppu,
+        }
+    }
+
+    /// The upper (`face` = 1) or lower (-1) face at arclength fraction `s` (straight
+    /// beyond the clamp for s < 0).
+    fn face(&self, s: f64, face: f64) -> [f64; 2] {
+        let d = self.direction;
+        let (p, slope) = if s >= 0.0 {
+            let c = self.centreline.point(s);
+            let local = add(scale(d, c[0]), scale(ccw_normal(d), c[1]));
+            (
+                add(self.clamp, scale(local, self.length_px)),
+                self.centreline.slope_rad(s),
+            )
+        } else {
+            (add(self.clamp, scale(d, s * self.length_px)), 0.0)
+        };
+        let up = scale(ccw_normal(rotate(d, slope)), self.side);
+        add(p, scale(up, face * self.half_thickness_px))
     }
 }
 

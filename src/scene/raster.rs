@@ -30,6 +30,11 @@ impl Rasterizer {
         self.acc.resize(stride * self.height, 0.0);
         self.span.clear();
         self.span.resize(self.height, (u32::MAX, 0));
+        // Clipping adds at most two vertices per clip line; room for long outlines.
+        let vertices = 8 * (self.width + self.height) + 8;
+        for v in [&mut self.clip_a, &mut self.clip_b] {
+            v.reserve(vertices.saturating_sub(v.len()));
+        }
     }
 
     /// Fills `polygon` (vertices in pixel coordinates, implicitly closed) and calls

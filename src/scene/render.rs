@@ -38,6 +38,10 @@ const STREAM_SCRATCHES: u64 = 3;
 const STREAM_JITTER: u64 = 4;
 const STREAM_NOISE: u64 = 5;
 
+/// Blur sigma the buffers are prepared for when a frame size is first seen (a larger
+/// sigma still works; its first frame grows the buffers).
+const MAX_PREPARED_BLUR_PX: f64 = 3.0;
+
 /// Renders frames; keeps its buffers between calls.
 #[derive(Debug, Default)]
 pub struct Renderer {
@@ -75,6 +79,19 @@ impl Renderer {
     /// Renders the noisy frame into the internal f32 canvas (grey levels, unclamped).
     pub fn render_canvas(&mut self, spec: &FrameSpec) -> Truth {
         let (w, h) = (spec.width as usize, spec.height as usize);
+        if self.canvas.len() != w * h {
+            // Room for the longest outlines a frame of this size can need (the beam is
+            // sampled every 6 px across up to about twice the frame), so later frames
+            // of any pose do not grow these buffers.
+            let vertices = 8 * (w + h);
+            for v in [&mut self.polygon, &mut self.inset] {
+                v.reserve(vertices.saturating_sub(v.len()));
+            }
+            self.particles.reserve(64);
+            self.scratches.reserve(16);
+            self.row.reserve(w);
+            self.blur.reserve(w, MAX_PREPARED_BLUR_PX);
+        }
         self.canvas.resize(w * h, 0.0);
         self.raster.resize(spec.width, spec.height);
         self.draw_background(spec);
@@ -149,11 +166,11 @@ impl Renderer {
         let level0 = (look.probe - 0.5 * look.probe_ramp) as f32;
         let level = |x: usize| level0 + ramp * x as f32;
         let rim = look.outline as f32;
-        if rim != 0.0 {
+        if rim != 0.0 && look.outline_width_px > 0.0 {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, |x| {
                 level(x) + rim
             });
-            inset_polygon(&self.polygon, 1.0, &mut self.inset);
+            inset_polygon(&self.polygon, look.outline_width_px, &mut self.inset);
             paint_over(&mut self.raster, &self.inset, &mut self.canvas, w, level);
         } else {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, level);

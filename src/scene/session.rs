@@ -109,10 +109,20 @@ impl Session {
                 s.from[1] + t * (s.to[1] - s.from[1]),
             ]
         };
-        // The reference beam is straight, so red clicks may reach beyond the end block.
+        // The reference beam is straight, so red clicks may reach beyond the end block,
+        // as far as the frame allows.
         let h_px = self.probe().pyramid_height_um * self.reference.px_per_um();
         let red_len = edges.red.length();
-        let red = [1.75, 1.0, 0.25].map(|k| along(&edges.red, 1.0 - k * h_px / red_len));
+        let (w, h) = (
+            f64::from(self.reference.width),
+            f64::from(self.reference.height),
+        );
+        let inside = |p: [f64; 2]| p[0] >= 3.0 && p[1] >= 3.0 && p[0] <= w - 4.0 && p[1] <= h - 4.0;
+        let mut reach = 1.75 * h_px;
+        while reach > 0.3 * red_len && !inside(along(&edges.red, 1.0 - reach / red_len)) {
+            reach *= 0.95;
+        }
+        let red = [1.0, 0.57, 0.14].map(|k| along(&edges.red, 1.0 - k * reach / red_len));
         Clicks {
             red: red.into_iter().map(&mut click).collect(),
             blue: [0.15, 0.5, 0.85]

@@ -35,13 +35,14 @@ impl Style {
         let base = Look {
             style_name: self.name(),
             noise_sigma: 6.0,
-            blur_sigma_px: 0.71,
+            blur_sigma_px: 0.73,
             jitter_fraction: 0.0,
             background: 70.0,
             shading: 18.0,
-            probe: 214.5,
+            probe: 214.2,
             probe_ramp: 12.0,
-            outline: 4.0,
+            outline: 3.0,
+            outline_width_px: 2.5,
             particles: 3,
             scratches: 0,
             substrate: None,
@@ -50,21 +51,21 @@ impl Style {
             Style::Clean => base,
             Style::Clutter => Look {
                 noise_sigma: 14.0,
-                blur_sigma_px: 0.92,
-                jitter_fraction: 0.02,
+                blur_sigma_px: 0.93,
+                jitter_fraction: 0.08,
                 background: 80.0,
                 probe: 209.0,
-                particles: 12,
+                particles: 10,
                 scratches: 5,
                 substrate: Some(118.0),
                 ..base
             },
             Style::Noisy => Look {
                 noise_sigma: 22.0,
-                blur_sigma_px: 1.12,
-                jitter_fraction: 0.02,
+                blur_sigma_px: 1.14,
+                jitter_fraction: 0.045,
                 background: 75.0,
-                probe: 204.0,
+                probe: 204.6,
                 particles: 5,
                 scratches: 1,
                 substrate: Some(110.0),
@@ -72,12 +73,12 @@ impl Style {
             },
             Style::Harsh => Look {
                 noise_sigma: 30.0,
-                blur_sigma_px: 1.52,
-                jitter_fraction: 0.05,
+                blur_sigma_px: 1.57,
+                jitter_fraction: 0.08,
                 background: 96.0,
-                probe: 189.0,
-                particles: 15,
-                scratches: 5,
+                probe: 190.5,
+                particles: 19,
+                scratches: 6,
                 substrate: Some(128.0),
                 ..base
             },
@@ -105,8 +106,10 @@ pub struct Look {
     pub probe: f64,
     /// Rise of the probe level from the left edge to the right edge of the frame.
     pub probe_ramp: f64,
-    /// Extra brightness of a one-pixel band along the probe's outline (edge effect).
+    /// Extra brightness of a band along the inside of the probe's outline (edge effect).
     pub outline: f64,
+    /// Width of that band, pixels.
+    pub outline_width_px: f64,
     /// Number of bright particles.
     pub particles: u32,
     /// Number of straight scratches.

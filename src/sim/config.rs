@@ -43,7 +43,6 @@ struct RawSem {
     style: Option<String>,
     seed: Option<u64>,
     magnification: Option<Vec<[f64; 2]>>,
-    reference_magnification: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -74,8 +73,6 @@ pub struct SemParams {
     pub seed: u64,
     /// (time s, magnification) steps: from each time on, that magnification.
     pub magnification: Vec<(f64, f64)>,
-    /// Magnification of the calibration frame.
-    pub reference_magnification: f64,
 }
 
 impl Default for SemParams {
@@ -88,7 +85,6 @@ impl Default for SemParams {
             style: "noisy".into(),
             seed: 1,
             magnification: vec![(0.0, 3500.0), (9.0, 2000.0), (18.0, 5000.0), (27.0, 3500.0)],
-            reference_magnification: 3500.0,
         }
     }
 }
@@ -101,7 +97,7 @@ impl SemParams {
             .take_while(|(from, _)| *from <= t_s)
             .last()
             .or(self.magnification.first())
-            .map_or(self.reference_magnification, |(_, m)| *m)
+            .map_or(2000.0, |(_, m)| *m)
     }
 }
 
@@ -270,10 +266,6 @@ impl SimConfig {
             style,
             seed: raw.seed.unwrap_or(d.seed),
             magnification,
-            reference_magnification: match raw.reference_magnification {
-                Some(m) => check_mag("sim.sem.reference_magnification", m)?,
-                None => d.reference_magnification,
-            },
         })
     }
 }

@@ -5,4 +5,5 @@
 pub mod config;
 pub mod contact;
 pub mod operator;
+pub mod sem;
 pub mod stage;

@@ -29,13 +29,13 @@ pub struct OperatorParams {
 impl Default for OperatorParams {
     fn default() -> Self {
         OperatorParams {
-            approach_mm: 12.0,
-            press_mm: 7.0,
-            retract_mm: 12.0,
+            approach_mm: 15.0,
+            press_mm: 15.0,
+            retract_mm: 15.0,
             touch_nn: 150.0,
             target_force_nn: 3000.0,
             hold_s: 2.0,
-            retract_s: 4.0,
+            retract_s: 6.0,
             rest_s: 1.0,
             hand_stiffness_n_per_mm: 0.6,
             stylus_mass_kg: 0.05,
@@ -214,7 +214,7 @@ mod tests {
             op.feel(springs);
             op.advance(0.6 + i as f64 * 1e-3);
         }
-        let expected = -12.0 * 0.6 / (0.6 + 0.05);
+        let expected = -15.0 * 0.6 / (0.6 + 0.05);
         assert!(
             (op.position_mm().z - expected).abs() < 0.01,
             "{}",
@@ -239,9 +239,9 @@ mod tests {
         op.advance(2.7);
         assert_eq!(op.phase(), Phase::Retract);
         op.feel(Vector3::zeros());
-        op.advance(6.8);
+        op.advance(8.8);
         assert_eq!(op.phase(), Phase::Rest);
-        op.advance(7.9);
+        op.advance(9.9);
         assert_eq!(op.phase(), Phase::Approach);
         assert_eq!(op.cycles, 1);
     }

@@ -40,3 +40,4 @@ pub trait FrameSource: Send {
     /// size is unchanged) and returns its metadata.
     fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError>;
 }
+pub mod sim;

@@ -1,0 +1,149 @@
+//! `nanoforce calibrate`: refines a person's clicks on the calibration frame and prints
+//! the `[tracker.calibration]` block, with an overlay PNG to check it by eye.
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::config::{CalibrationConfig, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
+use crate::session::frames::load_gray;
+use crate::vision::{draw_calibration, Calibration, Edge};
+
+#[derive(Debug, Args)]
+#[command(
+    long_about = "Calibrates the tracker on a reference frame: the undeformed probe, \
+which defines angle zero.\n\n\
+Click two or more pixels on each of the three tip edges (x right, y down, origin at the \
+top-left pixel's centre) in any image viewer:\n  \
+red   = the beam's upper face near the free end\n  \
+blue  = the pyramid's back face, from its base to the apex\n  \
+green = the pyramid's front face, from the apex back to the beam\n\n\
+Clicks are off by up to a pixel, which would put each edge's orientation off by tenths of \
+a degree; calibrate refines every edge on the image's grey levels. It prints the \
+[tracker.calibration] block for probe.toml (the clicks, with the refined orientations \
+as comments) and writes an overlay PNG with the refined edges in red, blue and green and \
+the apex marked: look at it before a session.",
+    after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
+--red 156.8,33.4 228.3,57.3 --blue 230.7,114.2 260.6,192.0 --green 282.5,199.8 314.8,142.9 \\\n      \
+--overlay calibration.png >> probe.toml"
+)]
+pub struct CalibrateArgs {
+    /// The reference frame (PNG, TIFF or PGM).
+    #[arg(long, value_name = "FILE")]
+    pub image: PathBuf,
+    /// Pixels on the red edge, as X,Y (two or more).
+    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    pub red: Vec<[f64; 2]>,
+    /// Pixels on the blue edge, as X,Y (two or more).
+    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    pub blue: Vec<[f64; 2]>,
+    /// Pixels on the green edge, as X,Y (two or more).
+    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    pub green: Vec<[f64; 2]>,
+    /// Where to write the overlay (default: calibration-overlay.png beside the image).
+    #[arg(long, value_name = "FILE")]
+    pub overlay: Option<PathBuf>,
+    /// Binarisation level 0..=255 or "otsu", as [tracker] threshold.
+    #[arg(long, default_value = "otsu", value_parser = parse_threshold)]
+    pub threshold: Threshold,
+    /// Search half-window, degrees, as [tracker] window_deg.
+    #[arg(long, default_value_t = DEFAULT_WINDOW_DEG)]
+    pub window_deg: f64,
+}
+
+fn parse_point(s: &str) -> Result<[f64; 2], String> {
+    let (x, y) = s
+        .split_once(',')
+        .ok_or_else(|| format!("{s:?} is not X,Y"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{s:?}: {v:?} is not a finite number"))
+    };
+    Ok([parse(x)?, parse(y)?])
+}
+
+fn parse_threshold(s: &str) -> Result<Threshold, String> {
+    if s.eq_ignore_ascii_case("otsu") {
+        return Ok(Threshold::Otsu);
+    }
+    s.parse::<u8>()
+        .map(Threshold::Level)
+        .map_err(|_| format!("{s:?} is neither a grey level 0..=255 nor \"otsu\""))
+}
+
+pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
+    let reference = load_gray(&args.image)?;
+    let clicks = CalibrationConfig {
+        reference_image: args.image.clone(),
+        red: args.red,
+        blue: args.blue,
+        green: args.green,
+    };
+    if !(args.window_deg.is_finite() && args.window_deg > 0.0 && args.window_deg <= 45.0) {
+        anyhow::bail!("--window-deg must be in (0, 45], got {}", args.window_deg);
+    }
+    let tracker = TrackerConfig {
+        threshold: args.threshold,
+        window_deg: args.window_deg,
+        calibration: None,
+    };
+    let calibration = Calibration::from_reference(&reference, &clicks, &tracker)
+        .with_context(|| format!("calibrating on {}", args.image.display()))?;
+    print!("{}", calibration_block(&clicks, &calibration));
+    let overlay_path = args
+        .overlay
+        .unwrap_or_else(|| args.image.with_file_name("calibration-overlay.png"));
+    draw_calibration(&reference, &calibration)
+        .save(&overlay_path)
+        .with_context(|| format!("writing {}", overlay_path.display()))?;
+    eprintln!(
+        "overlay written to {}: check the three edges and the apex",
+        overlay_path.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The `[tracker.calibration]` block: clicks as keys, refined orientations as comments.
+pub fn calibration_block(clicks: &CalibrationConfig, calibration: &Calibration) -> String {
+    let points = |v: &[[f64; 2]]| {
+        let inner: Vec<String> = v
+            .iter()
+            .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
+            .collect();
+        format!("[{}]", inner.join(", "))
+    };
+    let name = clicks.reference_image.file_name().map_or_else(
+        || clicks.reference_image.display().to_string(),
+        |n| n.to_string_lossy().to_string(),
+    );
+    let mut out = format!(
+        "[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n\
+         red = {}\nblue = {}\ngreen = {}\n",
+        points(&clicks.red),
+        points(&clicks.blue),
+        points(&clicks.green)
+    );
+    out.push_str(
+        "# Refined on the reference image (degrees, CCW on screen); from the clicks alone:\n",
+    );
+    for edge in [Edge::Red, Edge::Blue, Edge::Green] {
+        let e = calibration.edge(edge);
+        out.push_str(&format!(
+            "#   {:<5} {:>9.3}   (clicks {:>9.3}, {:+.3})\n",
+            edge.name(),
+            e.orientation_deg,
+            e.clicked_orientation_deg,
+            e.clicked_orientation_deg - e.orientation_deg
+        ));
+    }
+    let apex = calibration.apex_px();
+    out.push_str(&format!(
+        "# Apex (blue meets green): ({:.2}, {:.2}) px\n",
+        apex[0], apex[1]
+    ));
+    out
+}

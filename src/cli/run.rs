@@ -1,0 +1,172 @@
+//! `nanoforce run`: the real-time teleoperation daemon. Without `--config` it runs the
+//! built-in simulated lab (config/sim.toml, compiled in), so it works anywhere.
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::config::Config;
+use crate::daemon::notify::Notifier;
+use crate::daemon::{lab, telemetry, Daemon, ExitReason, RunOptions};
+use crate::hw::Clock;
+
+/// The built-in simulated lab.
+pub const SIM_CONFIG: &str = include_str!("../../config/sim.toml");
+
+#[derive(Debug, Args)]
+#[command(
+    long_about = "Runs the real-time teleoperation daemon.\n\n\
+Threads: frames (the SEM source) -> tracker (tip angle and force) -> the 1 kHz haptic \
+loop, which reads the stylus, renders the scaled force on top of centring springs and \
+sends the S100 its rate command. Without --config the built-in simulated lab runs \
+(simulated S100, sample, SEM and operator; see config/sim.toml).\n\n\
+Signals: SIGINT or SIGTERM stop cleanly with the outputs at zero; SIGHUP reloads the \
+[teleop] and [safety] gains from the config file (an invalid file is rejected and the \
+old gains kept). Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
+Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.toml, \
+stats.json) in a session folder under the state directory.",
+    after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
+nanoforce run --duration-s 30 --stats-json stats.json\n  \
+nanoforce run --config /etc/nanoforce/lab.toml"
+)]
+pub struct RunArgs {
+    /// Lab configuration (TOML); default: the built-in simulated lab.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration_s: Option<f64>,
+    /// Write the run's statistics (loop timing, frames, force error, safety) as JSON.
+    #[arg(long, value_name = "PATH")]
+    pub stats_json: Option<PathBuf>,
+    /// Record sessions under this directory (default: $STATE_DIRECTORY, else
+    /// [daemon] state_dir, else ~/.local/state/nanoforce).
+    #[arg(long, value_name = "DIR")]
+    pub state_dir: Option<PathBuf>,
+    /// Do not record a session folder.
+    #[arg(long)]
+    pub no_record: bool,
+    /// No live status line on the terminal.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
+    // The configuration is validated completely before any device is opened.
+    let (config, text) = load(args.config.as_deref())?;
+    let duration = match args.duration_s {
+        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--duration-s must be a positive number of seconds, got {s}"),
+        None => None,
+    };
+    let clock = Clock::start();
+    let devices = lab::open(&config, clock).context("opening the lab's devices")?;
+    let session_dir = if args.no_record {
+        None
+    } else {
+        let state_dir = args
+            .state_dir
+            .or_else(|| {
+                std::env::var_os("STATE_DIRECTORY")
+                    .is_none()
+                    .then(|| config.daemon.state_dir.clone())
+                    .flatten()
+            })
+            .unwrap_or_else(telemetry::default_state_dir);
+        let dir = telemetry::create_session_dir(&state_dir)
+            .with_context(|| format!("creating a session folder under {}", state_dir.display()))?;
+        std::fs::write(dir.join("config.toml"), &text)
+            .with_context(|| format!("writing {}", dir.join("config.toml").display()))?;
+        tracing::info!("recording this session in {}", dir.display());
+        Some(dir)
+    };
+    let reload_path = args.config.clone();
+    let options = RunOptions {
+        duration,
+        session_dir: session_dir.clone(),
+        status_line: !args.quiet,
+        handle_signals: true,
+        reload: reload_path.map(|path| {
+            Box::new(move || Ok(Config::load(&path)?.teleop))
+                as Box<dyn Fn() -> anyhow::Result<_> + Send>
+        }),
+        loop_options: config.daemon.loop_options.clone(),
+        notifier: Notifier::from_env().context("connecting to systemd's NOTIFY_SOCKET")?,
+        stop_when_frames_end: false,
+        clock,
+    };
+    let handle = Daemon::start(config.teleop.clone(), devices, options)?;
+    let outcome = handle.wait()?;
+    let json = serde_json::to_string_pretty(&outcome.stats)?;
+    if let Some(dir) = &session_dir {
+        std::fs::write(dir.join("stats.json"), &json)
+            .with_context(|| format!("writing {}", dir.join("stats.json").display()))?;
+    }
+    if let Some(path) = &args.stats_json {
+        std::fs::write(path, &json).with_context(|| format!("writing {}", path.display()))?;
+    }
+    summarise(&outcome.stats);
+    Ok(match outcome.exit {
+        ExitReason::ThreadFailed(name) => {
+            tracing::error!("the {name} thread failed; outputs were set to zero");
+            ExitCode::FAILURE
+        }
+        _ => ExitCode::SUCCESS,
+    })
+}
+
+/// The configuration and its text (recorded with the session).
+fn load(path: Option<&Path>) -> anyhow::Result<(Config, String)> {
+    match path {
+        Some(path) => {
+            let config = Config::load(path)?;
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok((config, text))
+        }
+        None => {
+            let config = Config::from_toml_str(SIM_CONFIG, Path::new("<built-in sim.toml>"))?;
+            Ok((config, SIM_CONFIG.to_string()))
+        }
+    }
+}
+
+fn summarise(stats: &crate::daemon::stats::RunStats) {
+    let l = &stats.haptic_loop;
+    let f = &stats.frames;
+    let opt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
+    eprintln!(
+        "ran {:.1} s: haptic loop {:.1} Hz (period p50 {} us, p99 {} us, max {} us, {} overruns); \
+         frames {} received, {} tracked, {} detected, {} dropped, latency p50 {} ms p99 {} ms",
+        stats.duration_s,
+        l.rate_hz,
+        opt(l.period_us_p50),
+        opt(l.period_us_p99),
+        opt(l.period_us_max),
+        l.overruns,
+        f.received,
+        f.tracked,
+        f.detected,
+        f.dropped,
+        opt(f.latency_ms_p50),
+        opt(f.latency_ms_p99),
+    );
+    if let (Some(peak), Some(rms), Some(max)) = (
+        stats.force.true_peak_nn,
+        stats.force.rms_error_nn,
+        stats.force.max_error_nn,
+    ) {
+        eprintln!(
+            "force against the simulated truth: peak {peak:.0} nN, rms error {rms:.1} nN ({:.2} %), \
+             max error {max:.1} nN ({:.2} %)",
+            100.0 * rms / peak.max(1e-9),
+            100.0 * max / peak.max(1e-9)
+        );
+    }
+    eprintln!(
+        "safety: {} stale events, {} faults",
+        stats.safety.stale_events, stats.safety.faults
+    );
+}

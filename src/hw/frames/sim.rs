@@ -1,0 +1,73 @@
+//! The `"sim"` frame backend: the simulated SEM renders the probe as the simulated stage
+//! has bent it, at the configured rate and delay, with ground truth attached.
+use image::GrayImage;
+
+use super::{FrameError, FrameMeta, FrameSource};
+use crate::hw::daq::sim::StageSnapshot;
+use crate::hw::Clock;
+use crate::scene::Renderer;
+use crate::sim::sem::SemScene;
+
+pub struct SimSem {
+    scene: SemScene,
+    stage: Option<triple_buffer::Output<StageSnapshot>>,
+    renderer: Renderer,
+    clock: Clock,
+    period_s: f64,
+    next_capture_s: Option<f64>,
+    sequence: u64,
+}
+
+impl SimSem {
+    /// `stage`: the simulated S100's state; without it the probe hangs free.
+    pub fn new(
+        scene: SemScene,
+        stage: Option<triple_buffer::Output<StageSnapshot>>,
+        clock: Clock,
+    ) -> Self {
+        let period_s = 1.0 / scene.params.rate_hz;
+        SimSem {
+            scene,
+            stage,
+            renderer: Renderer::new(),
+            clock,
+            period_s,
+            next_capture_s: None,
+            sequence: 0,
+        }
+    }
+}
+
+impl FrameSource for SimSem {
+    fn name(&self) -> &str {
+        "sim:SEM"
+    }
+
+    fn next_frame(&mut self, frame: &mut GrayImage) -> Result<FrameMeta, FrameError> {
+        let delay_s = self.scene.params.delay_ms * 1e-3;
+        let now_s = self.clock.now_s();
+        let mut capture_s = self.next_capture_s.unwrap_or(now_s);
+        // A frame whose delivery time has already passed was lost (we fell behind):
+        // skip to the next scan, as a real frame grabber would.
+        while capture_s + delay_s + self.period_s < now_s {
+            capture_s += self.period_s;
+            self.sequence += 1;
+        }
+        self.next_capture_s = Some(capture_s + self.period_s);
+        let stage_um = self
+            .stage
+            .as_mut()
+            .map(|s| s.read().position_at(capture_s))
+            .unwrap_or_default();
+        let (spec, truth) = self.scene.frame(capture_s, self.sequence, stage_um);
+        self.renderer.render_into(&spec, frame);
+        let deliver_ns = self.clock.monotonic_ns_at(capture_s + delay_s);
+        crate::daemon::rt::sleep_until(deliver_ns, 0);
+        self.sequence += 1;
+        Ok(FrameMeta {
+            sequence: self.sequence,
+            captured_s: capture_s,
+            truth: Some(truth),
+        })
+    }
+}
