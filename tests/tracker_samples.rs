@@ -1,42 +1,189 @@
-//! The tracker on the two public sample sessions, scored against their truth.
+//! The tracker on the two public sample sessions, scored against their truth the way
+//! `score.py` does, plus calibration on their reference images.
+//!
+//! Thresholds sit just above the measured values (docs/tracker.md), so a regression
+//! fails. The samples' apex truth sits about (-0.6, +0.2) px from where their own image
+//! content puts the apex (an independent least-squares fit agrees with the tracker, and
+//! the rendered suite, with exact truth, shows 0.09 px): the apex thresholds here allow
+//! for that offset rather than hiding it.
 mod tracker_support;
 
-use tracker_support::{sample, score, table};
+use image::Rgb;
+use nanoforce::vision::{draw_calibration, draw_overlay, Calibration, Edge, Tracker, VisionError};
+use tracker_support::{result_csv, sample, score, table};
 
 #[test]
-fn debug_samples() {
-    for name in ["mixed", "sequence"] {
-        let s = sample(name);
-        let cal = s.calibrate();
-        for e in nanoforce::vision::Edge::ALL {
-            let c = cal.edge(e);
-            println!(
-                "{name} {e}: {:.3} (clicked {:.3}) seg {:?} contrast {:.1}",
-                c.orientation_deg, c.clicked_orientation_deg, c.segment_px, c.contrast
-            );
-        }
-        println!("apex {:?} blur {:.2}", cal.apex_px(), cal.blur_px());
-        let est = s.run(false);
-        println!("{}", table(&s.truth, &est));
-        println!("{name}: {:?}", score(&s.truth, &est));
+fn mixed_sample_in_random_order() {
+    let s = sample("mixed");
+    let est = s.run(false);
+    let sc = score(&s.truth, &est);
+    let why = format!("{sc:?}\n{}", table(&s.truth, &est));
+    assert_eq!(sc.detect_rate, 1.0, "{why}");
+    assert_eq!(sc.false_detections, 0, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.046, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.16, "{why}");
+    assert!(sc.angle_err_max_deg <= 0.35, "{why}");
+    assert!(sc.tip_err_median_px <= 0.75, "{why}");
+}
+
+#[test]
+fn sequence_sample_with_and_without_coherence() {
+    let s = sample("sequence");
+    for coherence in [true, false] {
+        let est = s.run(coherence);
+        let sc = score(&s.truth, &est);
+        let why = format!("coherence {coherence}: {sc:?}\n{}", table(&s.truth, &est));
+        assert_eq!(sc.detect_rate, 1.0, "{why}");
+        assert!(sc.angle_err_median_deg <= 0.028, "{why}");
+        assert!(sc.angle_err_p95_deg <= 0.07, "{why}");
+        assert!(sc.angle_err_max_deg <= 0.1, "{why}");
+        assert!(sc.tip_err_median_px <= 0.6, "{why}");
     }
 }
 
 #[test]
-fn debug_scale() {
+fn forces_follow_the_model_and_the_truth() {
+    let s = sample("sequence");
+    let est = s.run(false);
+    for (t, e) in s.truth.iter().zip(&est) {
+        let angle = e.angle_deg.expect("detected");
+        let model = s.config.cantilever.force_nn(angle);
+        assert_eq!(e.force_nn, Some(model.value));
+        assert!(!e.force_saturated);
+        // The force error is the angle error times the local stiffness.
+        let per_deg = s.config.cantilever.force_nn(t.angle_deg + 0.5).value
+            - s.config.cantilever.force_nn(t.angle_deg - 0.5).value;
+        let allowed = per_deg.abs() * 0.12 + 1e-9;
+        assert!(
+            (model.value - t.force_nn).abs() <= allowed,
+            "{}: {} vs {}",
+            t.frame,
+            model.value,
+            t.force_nn
+        );
+    }
+}
+
+#[test]
+fn the_reference_reads_zero_and_clicks_are_refined() {
+    for name in ["mixed", "sequence"] {
+        let s = sample(name);
+        let cal = s.calibrate();
+        let mut tracker = Tracker::new(&s.config.tracker, cal.clone(), None);
+        let e = tracker.track(&s.reference);
+        let angle = e.angle_deg.expect("the reference is detected");
+        assert!(angle.abs() < 0.005, "{name}: reference reads {angle}");
+        let apex = e.apex_px.expect("apex");
+        let ref_apex = cal.apex_px();
+        assert!(
+            (apex[0] - ref_apex[0]).hypot(apex[1] - ref_apex[1]) < 0.05,
+            "{name}"
+        );
+        // Clicks alone are tenths of a degree off (scene.md); the refined orientation
+        // moves away from them by about that much.
+        let moved: f64 = Edge::ALL
+            .iter()
+            .map(|&edge| {
+                let c = cal.edge(edge);
+                (c.orientation_deg - c.clicked_orientation_deg).abs()
+            })
+            .fold(0.0, f64::max);
+        assert!(moved > 0.05 && moved < 1.0, "{name}: {moved}");
+    }
+}
+
+#[test]
+fn result_csvs_for_score_py() {
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("tracker-results");
+    std::fs::create_dir_all(&out).unwrap();
     for name in ["mixed", "sequence"] {
         let s = sample(name);
         let est = s.run(false);
-        for (t, e) in s.truth.iter().zip(&est) {
-            if let Some(sc) = e.scale {
-                println!(
-                    "{name} {} mag {} scale {:.4} -> ref mag {:.1}",
-                    t.frame,
-                    t.magnification,
-                    sc,
-                    t.magnification / sc
-                );
-            }
-        }
+        let csv = result_csv(&s.truth, &est);
+        assert_eq!(csv.lines().count(), s.truth.len() + 1);
+        std::fs::write(out.join(format!("{name}.csv")), csv).unwrap();
     }
+}
+
+#[test]
+fn bad_calibration_input_is_named() {
+    let s = sample("mixed");
+    let clicks = s.config.tracker.calibration.clone().unwrap();
+    let cfg = &s.config.tracker;
+    let mut outside = clicks.clone();
+    outside.blue[1] = [700.0, 20.0];
+    let err = Calibration::from_reference(&s.reference, &outside, cfg).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            VisionError::ClickOutside {
+                edge: Edge::Blue,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(
+        err.to_string().contains("blue click [700.0, 20.0]"),
+        "{err}"
+    );
+    // Clicks on the empty background: no edge there.
+    let mut nowhere = clicks.clone();
+    nowhere.green = vec![[560.0, 300.0], [590.0, 330.0], [610.0, 350.0]];
+    let err = Calibration::from_reference(&s.reference, &nowhere, cfg).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            VisionError::EdgeNotFound {
+                edge: Edge::Green,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Blue and green swapped: the faces do not enclose a bright pyramid.
+    let mut swapped = clicks.clone();
+    std::mem::swap(&mut swapped.blue, &mut swapped.green);
+    let err = Calibration::from_reference(&s.reference, &swapped, cfg).unwrap_err();
+    assert!(matches!(err, VisionError::Degenerate(_)), "{err}");
+    // The same clicks on a blank image.
+    let blank = image::GrayImage::from_pixel(640, 480, image::Luma([70]));
+    let err = Calibration::from_reference(&blank, &clicks, cfg).unwrap_err();
+    assert!(matches!(err, VisionError::EdgeNotFound { .. }), "{err}");
+}
+
+#[test]
+fn overlays_draw_the_edges_in_their_colours() {
+    let s = sample("mixed");
+    let cal = s.calibrate();
+    let mut tracker = Tracker::new(&s.config.tracker, cal.clone(), None);
+    let frame = s.frame("frame_00001.png");
+    let est = tracker.track(&frame);
+    let img = draw_overlay(&frame, &est);
+    assert_eq!(img.dimensions(), frame.dimensions());
+    for (edge, colour) in [
+        (Edge::Red, [255, 40, 40]),
+        (Edge::Blue, [60, 110, 255]),
+        (Edge::Green, [40, 220, 60]),
+    ] {
+        let fit = est.edges[edge.index()].expect("all three edges in view");
+        let mid = [
+            0.5 * (fit.start_px[0] + fit.end_px[0]),
+            0.5 * (fit.start_px[1] + fit.end_px[1]),
+        ];
+        let near = (-2..=2)
+            .flat_map(|dy| (-2..=2).map(move |dx| (dx, dy)))
+            .any(|(dx, dy)| {
+                let (x, y) = ((mid[0] as i32 + dx) as u32, (mid[1] as i32 + dy) as u32);
+                *img.get_pixel(x, y) == Rgb(colour)
+            });
+        assert!(near, "{edge} not drawn at {mid:?}");
+    }
+    let cal_img = draw_calibration(&s.reference, &cal);
+    let apex = cal.apex_px();
+    let ring = (-7..=7).any(|d| {
+        *cal_img.get_pixel((apex[0] as i32 + d) as u32, (apex[1] as i32 - 6) as u32)
+            == Rgb([255, 230, 0])
+    });
+    assert!(ring, "apex marker");
 }

@@ -12,12 +12,13 @@
 
 use image::GrayImage;
 
+use super::bands::{bands, BendPrior};
 use super::candidates::angle_gap;
 use super::edges::EdgeMap;
-use super::geometry::{along, dot, norm, screen_deg_from_image_rad, sub, Line};
+use super::geometry::{along, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner};
-use super::template::{Template, TemplateEdge, BLUE, GREEN, RED};
+use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
 use super::{Edge, VisionError};
 use crate::config::{CalibrationConfig, TrackerConfig};
 
@@ -27,6 +28,8 @@ const CLICK_BAND_PX: f64 = 3.0;
 const MAX_GAP_PX: f64 = 3.0;
 /// Gradient tolerance when following an edge, radians.
 const FOLLOW_ANGLE_RAD: f64 = 0.3;
+/// The reference beam is straight: the tracker's bend prior at rest.
+const REST_BEND_SIGMA_PX: f64 = 0.03;
 /// Initial blur guess for the grey-level fit, pixels.
 pub const BLUR0_PX: f64 = 1.2;
 
@@ -77,31 +80,33 @@ impl Calibration {
         pyr.build(reference);
         let mut map = EdgeMap::default();
         map.detect(&pyr, pyr.threshold(cfg.threshold));
-        let mut coarse = [None; 3];
-        for (e, pts) in points.iter().enumerate() {
-            coarse[e] = Some(locate(Edge::ALL[e], pts, reference, &pyr, &map)?);
-        }
-        let coarse = coarse.map(|c| c.expect("all three located"));
+        let coarse = [
+            locate(Edge::Red, &clicks.red, reference, &pyr, &map)?,
+            locate(Edge::Blue, &clicks.blue, reference, &pyr, &map)?,
+            locate(Edge::Green, &clicks.green, reference, &pyr, &map)?,
+        ];
         let apex0 = coarse[BLUE]
             .line
             .intersect(&coarse[GREEN].line)
             .ok_or_else(|| VisionError::Degenerate("blue and green are parallel".into()))?;
-        let bands = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
-        let fit = Refiner::default()
-            .fit(reference, &bands, false, BLUR0_PX)
-            .ok_or_else(|| {
-                VisionError::Degenerate("the grey-level fit of the edges failed".into())
-            })?;
-        let mut lines = [coarse[0].line; 3];
-        let mut contrast = [0.0; 3];
-        for e in 0..3 {
-            let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
-                edge: Edge::ALL[e],
-                reason: "too few pixels along the edge".into(),
-            })?;
-            lines[e] = r.line;
-            contrast[e] = r.contrast;
-        }
+        // First pass: each edge over its followed extent, to learn the template.
+        let first = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
+        let (lines, _, blur) = fit_edges(reference, &first, BLUR0_PX)?;
+        let template = build_template(&lines, &coarse)?;
+        // Second pass on exactly the stretches the tracker fits (the template at rest),
+        // so that the reference itself reads zero.
+        let at_rest = Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: template.apex,
+        };
+        let size = [w as f64, h as f64];
+        let straight = BendPrior {
+            mean: 0.0,
+            sigma: REST_BEND_SIGMA_PX,
+        };
+        let second = bands(&template, &at_rest, size, blur, straight);
+        let (lines, contrast, blur) = fit_edges(reference, &second, blur)?;
         let template = build_template(&lines, &coarse)?;
         let edges = std::array::from_fn(|e| {
             let edge = &template.edges[e];
@@ -121,7 +126,7 @@ impl Calibration {
             edges,
             template,
             image_size: [w, h],
-            blur_px: fit.blur,
+            blur_px: blur,
         })
     }
 
@@ -148,6 +153,31 @@ impl Calibration {
     pub(crate) fn template(&self) -> &Template {
         &self.template
     }
+}
+
+/// Each edge's own grey-level fit over `bands`: lines, contrasts and the blur.
+fn fit_edges(
+    reference: &GrayImage,
+    bands: &[Option<Band>; 3],
+    blur: f64,
+) -> Result<([Line; 3], [f64; 3], f64), VisionError> {
+    let fit = Refiner::default()
+        .fit(reference, bands, false, blur, false)
+        .ok_or_else(|| VisionError::Degenerate("the grey-level fit of the edges failed".into()))?;
+    let mut lines = [Line {
+        normal: [1.0, 0.0],
+        rho: 0.0,
+    }; 3];
+    let mut contrast = [0.0; 3];
+    for e in 0..3 {
+        let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
+            edge: Edge::ALL[e],
+            reason: "too few pixels along the edge".into(),
+        })?;
+        lines[e] = r.line;
+        contrast[e] = r.contrast;
+    }
+    Ok((lines, contrast, fit.blur))
 }
 
 /// Orientation of a line's direction, degrees CCW on screen, in (-90, 90].
@@ -375,6 +405,8 @@ fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
         end: at(tf),
         line: loc.line,
         bend_from: None,
+        bend0: 0.0,
+        bend_sigma: f64::INFINITY,
     }
 }
 
@@ -448,10 +480,26 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
             "blue and green do not enclose a bright pyramid (check which edge is which)",
         ));
     }
+    // Blue is the back face (towards the clamp), green the front face (towards the free
+    // end): their bases come in that order along the beam.
+    let red = &edges[RED];
+    let towards_clamp = scale(along(red.normal), (red.far_tau - red.tip_tau).signum());
+    let (tb, tg) = (
+        dot(towards_clamp, sub(far_point(BLUE), apex)),
+        dot(towards_clamp, sub(far_point(GREEN), apex)),
+    );
+    if tb <= tg {
+        return Err(degenerate(
+            "blue must be the pyramid's back face (towards the clamp) and green its front \
+             face (towards the free end); check which edge is which",
+        ));
+    }
     let height = -edges[RED].offset;
+    let bend_tau = dot(along(edges[RED].normal), sub(far_point(BLUE), apex));
     Ok(Template {
         edges,
         apex,
         height,
+        bend_tau,
     })
 }

@@ -5,15 +5,18 @@
 
 use super::edges::EdgePoint;
 use super::geometry::{along, clip_to_rect, dot, scale, sub, wrap_pi};
-use super::hough::Peak;
+use super::hough::{Peak, PEAKS_PER_EDGE};
 
 /// Inlier band half-width around a candidate line, detection pixels.
 const INLIER_PX: f64 = 1.5;
-/// Largest difference between a pixel's gradient and the line's normal, radians.
-const INLIER_ANGLE_RAD: f64 = 0.2;
+/// Smallest cosine between a pixel's gradient and the line's normal (0.2 rad).
+const INLIER_COS: f64 = 0.980_066_577_841_241_6;
 /// Two candidates of one edge closer than this in angle and offset are one line.
 const DUPLICATE_ANGLE_RAD: f64 = 0.02;
 const DUPLICATE_PX: f64 = 1.0;
+/// A raw peak this close to a listed candidate is not polished again.
+const COVERED_ANGLE_RAD: f64 = 0.026;
+const COVERED_PX: f64 = 1.5;
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
 pub const PROFILE_BINS: usize = 1024;
 
@@ -47,25 +50,37 @@ pub struct Candidates {
 }
 
 impl Candidates {
-    /// Polishes every peak into a candidate.
+    /// Polishes every peak into a candidate; `voters[e]` lists the points that could
+    /// belong to edge e (the Hough stage's polarity test).
     pub fn build(
         &mut self,
         peaks: &[Peak],
         points: &[EdgePoint],
+        voters: &[Vec<u32>; 3],
         normal_angles: [f64; 3],
         size: [usize; 2],
     ) {
         self.list.clear();
-        self.prefix
-            .resize(peaks.len().max(1) * (PROFILE_BINS + 1), 0);
+        // Sized for the most peaks there can be: no growth from frame to frame.
+        let most = 3 * PEAKS_PER_EDGE;
+        debug_assert!(peaks.len() <= most);
+        self.list.reserve(most);
+        self.prefix.resize(most * (PROFILE_BINS + 1), 0);
         self.marks.resize(PROFILE_BINS, 0);
         for (slot, peak) in peaks.iter().enumerate() {
             let nu = normal_angles[peak.edge] + peak.psi;
             let mut normal = [nu.cos(), nu.sin()];
             let mut rho = peak.rho;
+            if self.covered(peak.edge, peak.psi, normal, rho) {
+                continue;
+            }
+            let mine = Voters {
+                points,
+                index: &voters[peak.edge],
+            };
             let mut fit = None;
             for band in [INLIER_PX + 0.5, INLIER_PX] {
-                match fit_line(points, normal, rho, band) {
+                match fit_line(&mine, normal, rho, band) {
                     Some(f) => {
                         normal = f.normal;
                         rho = dot(normal, f.centroid);
@@ -88,10 +103,20 @@ impl Candidates {
                 bins: 0,
                 slot,
             };
-            if !self.duplicate(&cand) && self.profile(&mut cand, points, size) {
+            if !self.duplicate(&cand) && self.profile(&mut cand, &mine, size) {
                 self.list.push(cand);
             }
         }
+    }
+
+    /// Whether a raw peak already lies on a listed candidate of its edge (then polishing
+    /// it would only find that line again).
+    fn covered(&self, edge: usize, psi: f64, normal: [f64; 2], rho: f64) -> bool {
+        self.list.iter().any(|o| {
+            o.edge == edge
+                && wrap_pi(o.psi - psi).abs() < COVERED_ANGLE_RAD
+                && (dot(normal, o.centroid) - rho).abs() < COVERED_PX
+        })
     }
 
     /// Whether an equivalent line (same edge, direction and position) is already listed:
@@ -106,7 +131,7 @@ impl Candidates {
     }
 
     /// Builds the support profile of `c` over the part of its line inside the image.
-    fn profile(&mut self, c: &mut Candidate, points: &[EdgePoint], size: [usize; 2]) -> bool {
+    fn profile(&mut self, c: &mut Candidate, points: &Voters, size: [usize; 2]) -> bool {
         let d = along(c.normal);
         let hi = [size[0] as f64 - 1.0, size[1] as f64 - 1.0];
         let Some((t0, t1)) = clip_to_rect(c.centroid, d, [0.0, 0.0], hi) else {
@@ -119,14 +144,14 @@ impl Candidates {
         let marks = &mut self.marks[..c.bins];
         marks.iter_mut().for_each(|m| *m = 0);
         let rho = dot(c.normal, c.centroid);
-        for p in points {
+        for p in points.iter() {
             let q = [p.x as f64, p.y as f64];
-            if (dot(c.normal, q) - rho).abs() > INLIER_PX
-                || angle_gap(p.angle as f64, c.normal) > INLIER_ANGLE_RAD
-            {
+            if (dot(c.normal, q) - rho).abs() > INLIER_PX || p.alignment(c.normal) < INLIER_COS {
                 continue;
             }
-            let i = ((dot(d, sub(q, c.centroid)) - t0) / c.bin).floor();
+            // Truncation is floor here (non-negative); f64::floor is a libm call on
+            // baseline x86-64.
+            let i = (dot(d, sub(q, c.centroid)) - t0) / c.bin;
             if i >= 0.0 && (i as usize) < c.bins {
                 marks[i as usize] = 1;
             }
@@ -149,8 +174,8 @@ impl Candidates {
     /// line (`t` from its centroid, either order).
     pub fn support(&self, c: &Candidate, ta: f64, tb: f64) -> (f64, f64) {
         let (lo, hi) = (ta.min(tb), ta.max(tb));
-        let a = ((lo - c.t_first) / c.bin).round().clamp(0.0, c.bins as f64) as usize;
-        let b = ((hi - c.t_first) / c.bin).round().clamp(0.0, c.bins as f64) as usize;
+        let bin_of = |t: f64| ((t - c.t_first) / c.bin + 0.5).clamp(0.0, c.bins as f64) as usize;
+        let (a, b) = (bin_of(lo), bin_of(hi));
         if b <= a {
             return (0.0, 0.0);
         }
@@ -170,6 +195,18 @@ pub fn angle_gap(angle: f64, normal: [f64; 2]) -> f64 {
     wrap_pi(angle - normal[1].atan2(normal[0])).abs()
 }
 
+/// The points one edge may use.
+struct Voters<'a> {
+    points: &'a [EdgePoint],
+    index: &'a [u32],
+}
+
+impl Voters<'_> {
+    fn iter(&self) -> impl Iterator<Item = &EdgePoint> + '_ {
+        self.index.iter().map(|&i| &self.points[i as usize])
+    }
+}
+
 struct Fit {
     normal: [f64; 2],
     centroid: [f64; 2],
@@ -179,14 +216,12 @@ struct Fit {
 
 /// Total-least-squares line through the points within `band` of `normal . p = rho`
 /// whose gradient agrees with `normal`; the new normal keeps the old orientation.
-fn fit_line(points: &[EdgePoint], normal: [f64; 2], rho: f64, band: f64) -> Option<Fit> {
+fn fit_line(points: &Voters, normal: [f64; 2], rho: f64, band: f64) -> Option<Fit> {
     let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
     let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in points {
+    for p in points.iter() {
         let q = [p.x as f64, p.y as f64];
-        if (dot(normal, q) - rho).abs() > band
-            || angle_gap(p.angle as f64, normal) > INLIER_ANGLE_RAD
-        {
+        if (dot(normal, q) - rho).abs() > band || p.alignment(normal) < INLIER_COS {
             continue;
         }
         n += 1.0;
@@ -247,6 +282,8 @@ mod tests {
                 x: (50.0 + i as f64 * a.cos()) as f32,
                 y: (80.0 + i as f64 * a.sin()) as f32,
                 angle: normal_angle as f32,
+                ux: normal_angle.cos() as f32,
+                uy: normal_angle.sin() as f32,
                 mag: 40.0,
             })
             .collect();
@@ -257,9 +294,11 @@ mod tests {
             votes: 60,
         };
         let mut c = Candidates::default();
+        let all: Vec<u32> = (0..pts.len() as u32).collect();
         c.build(
             &[peak],
             &pts,
+            &[all.clone(), all.clone(), all],
             [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
             [320, 240],
         );

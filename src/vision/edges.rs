@@ -25,7 +25,18 @@ pub struct EdgePoint {
     pub y: f32,
     /// Image angle of the gradient, pointing towards the brighter side, radians.
     pub angle: f32,
+    /// The gradient's unit vector (cos, sin of `angle`).
+    pub ux: f32,
+    pub uy: f32,
     pub mag: f32,
+}
+
+impl EdgePoint {
+    /// Cosine of the angle between the gradient and a unit normal: cheaper than angles.
+    #[inline]
+    pub fn alignment(&self, normal: [f64; 2]) -> f64 {
+        self.ux as f64 * normal[0] + self.uy as f64 * normal[1]
+    }
 }
 
 /// Edge pixels of one frame, plus a per-pixel map of their gradient directions.
@@ -40,6 +51,8 @@ pub struct EdgeMap {
     pub noise: f32,
     state: Vec<u8>,
     stack: Vec<u32>,
+    /// Pixels that survived suppression (weak or strong), in scan order.
+    marked: Vec<u32>,
 }
 
 const NONE: u8 = 0;
@@ -68,6 +81,13 @@ impl EdgeMap {
         self.direction.clear();
         self.direction.resize(w * h, 0);
         self.points.clear();
+        self.marked.clear();
+        self.stack.clear();
+        // Room for the worst case (every pixel an edge), once per image size: after
+        // that, no frame allocates whatever it shows.
+        self.points.reserve(w * h);
+        self.marked.reserve(w * h);
+        self.stack.reserve(w * h);
         self.noise = pyr.gradient_noise();
         let high = HIGH_SIGMAS * self.noise;
         let low = LOW_SIGMAS * self.noise;
@@ -80,12 +100,12 @@ impl EdgeMap {
     fn suppress(&mut self, pyr: &Pyramid, low: f32, high: f32, threshold: f32) {
         let (w, h) = (self.width, self.height);
         for y in 3..h.saturating_sub(3) {
-            for x in 3..w.saturating_sub(3) {
-                let i = y * w + x;
-                let m = pyr.mag[i];
+            let row = &pyr.mag[y * w..(y + 1) * w];
+            for (x, &m) in row.iter().enumerate().take(w.saturating_sub(3)).skip(3) {
                 if m < low {
                     continue;
                 }
+                let i = y * w + x;
                 let (dx, dy) = neighbour_step(pyr.gx[i], pyr.gy[i]);
                 let ahead = (i as isize + dy * w as isize + dx) as usize;
                 let behind = (i as isize - dy * w as isize - dx) as usize;
@@ -93,12 +113,19 @@ impl EdgeMap {
                     continue;
                 }
                 let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
-                let bx = (x as f32 + BRIGHT_SIDE_PX * ux).round() as usize;
-                let by = (y as f32 + BRIGHT_SIDE_PX * uy).round() as usize;
+                // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
+                let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as usize;
+                let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as usize;
                 if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
                     continue;
                 }
-                self.state[i] = if m >= high { STRONG } else { WEAK };
+                self.marked.push(i as u32);
+                if m >= high {
+                    self.state[i] = STRONG;
+                    self.stack.push(i as u32);
+                } else {
+                    self.state[i] = WEAK;
+                }
             }
         }
     }
@@ -106,12 +133,6 @@ impl EdgeMap {
     /// Grows STRONG pixels into connected WEAK ones; whatever stays WEAK is dropped.
     fn hysteresis(&mut self) {
         let w = self.width;
-        self.stack.clear();
-        for (i, &s) in self.state.iter().enumerate() {
-            if s == STRONG {
-                self.stack.push(i as u32);
-            }
-        }
         while let Some(i) = self.stack.pop() {
             let i = i as usize;
             for off in [-(w as isize) - 1, -(w as isize), -(w as isize) + 1, -1, 1] {
@@ -129,8 +150,9 @@ impl EdgeMap {
     /// Lists the STRONG pixels with a sub-pixel position across the edge.
     fn collect(&mut self, pyr: &Pyramid) {
         let w = self.width;
-        for (i, &s) in self.state.iter().enumerate() {
-            if s != STRONG {
+        for k in 0..self.marked.len() {
+            let i = self.marked[k] as usize;
+            if self.state[i] != STRONG {
                 continue;
             }
             let (x, y) = (i % w, i / w);
@@ -144,12 +166,14 @@ impl EdgeMap {
             } else {
                 0.0
             };
-            let angle = gy.atan2(gx);
+            let angle = fast_atan2(gy, gx);
             self.direction[i] = direction_code(angle);
             self.points.push(EdgePoint {
                 x: x as f32 + offset * dx as f32,
                 y: y as f32 + offset * dy as f32,
                 angle,
+                ux: gx / m,
+                uy: gy / m,
                 mag: m,
             });
         }
@@ -161,17 +185,46 @@ impl EdgeMap {
     /// a pixel of `p` across the line of unit normal `normal`.
     pub fn supports(&self, p: [f64; 2], normal: [f64; 2], normal_angle: f64, tol: f64) -> bool {
         for k in [-1.0, 0.0, 1.0] {
-            let x = (p[0] + k * normal[0]).round();
-            let y = (p[1] + k * normal[1]).round();
+            let x = p[0] + k * normal[0] + 0.5;
+            let y = p[1] + k * normal[1] + 0.5;
             if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
                 continue;
             }
+            // Non-negative: truncation rounds (f64::round is a libm call on x86-64).
             let code = self.direction[y as usize * self.width + x as usize];
             if code != 0 && wrap_pi(code_angle(code) as f64 - normal_angle).abs() < tol {
                 return true;
             }
         }
         false
+    }
+}
+
+/// atan2 to about 1e-5 rad (a polynomial on one octant): the libm call was a tenth of
+/// the edge stage, and the Hough stage needs the direction to a degree.
+pub fn fast_atan2(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den) = if ax >= ay { (ay, ax) } else { (ax, ay) };
+    if den == 0.0 {
+        return 0.0;
+    }
+    let t = num / den;
+    let t2 = t * t;
+    // Minimax polynomial for atan on [0, 1].
+    let mut a = t
+        * (0.999_866_f32
+            + t2 * (-0.330_299_5 + t2 * (0.180_141 + t2 * (-0.085_133 + t2 * 0.020_835_1))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    if y < 0.0 {
+        -a
+    } else {
+        a
     }
 }
 
@@ -220,6 +273,19 @@ mod tests {
         // Nothing passes a mask brighter than the disc.
         edges.detect(&pyr, 230.0);
         assert!(edges.points.is_empty());
+    }
+
+    #[test]
+    fn fast_atan2_matches_the_library() {
+        for i in 0..3600 {
+            let a = (i as f32 / 10.0 - 180.0).to_radians();
+            for r in [0.3f32, 1.0, 250.0] {
+                let (y, x) = (r * a.sin(), r * a.cos());
+                let err = (fast_atan2(y, x) - y.atan2(x)).abs();
+                let err = err.min((err - std::f32::consts::TAU).abs());
+                assert!(err < 2e-5, "{a} {err}");
+            }
+        }
     }
 
     #[test]

@@ -17,13 +17,19 @@ pub fn image_rad_from_screen_deg(angle_deg: f64) -> f64 {
     -angle_deg.to_radians()
 }
 
-/// Wraps an angle to (-pi, pi].
+/// Wraps an angle to (-pi, pi]. Inputs are differences of angles, a turn or two at
+/// most, so a loop beats the remainder (a libm call).
 pub fn wrap_pi(angle_rad: f64) -> f64 {
-    let mut a = angle_rad % std::f64::consts::TAU;
-    if a > std::f64::consts::PI {
-        a -= std::f64::consts::TAU;
-    } else if a <= -std::f64::consts::PI {
-        a += std::f64::consts::TAU;
+    use std::f64::consts::{PI, TAU};
+    if !angle_rad.is_finite() {
+        return angle_rad;
+    }
+    let mut a = angle_rad;
+    while a > PI {
+        a -= TAU;
+    }
+    while a <= -PI {
+        a += TAU;
     }
     a
 }
@@ -57,7 +63,7 @@ pub fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
 }
 
 pub fn norm(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
 }
 
 /// The direction along an edge whose inward normal is `normal`: the normal turned by

@@ -49,7 +49,15 @@ pub struct Hough {
     sin: Vec<f32>,
     acc: Vec<u16>,
     smooth: Vec<u16>,
+    /// Per (edge, psi) row, the rho bins holding votes, and those `smooth` was written
+    /// in: only they are scanned and cleared (an empty row is `(MAX, 0)`).
+    votes_span: Vec<(usize, usize)>,
+    smooth_span: Vec<(usize, usize)>,
     pub peaks: Vec<Peak>,
+    /// Pixels of the detection image (the most edge points there can be).
+    pixels: usize,
+    /// Per edge, the indices of the points that voted for it (polarity-compatible).
+    pub voters: [Vec<u32>; 3],
 }
 
 impl Hough {
@@ -61,6 +69,7 @@ impl Hough {
         window_rad: f64,
         normal_angles: [f64; 3],
     ) {
+        self.pixels = width * height;
         let n_psi = 2 * (window_rad / PSI_STEP_RAD).ceil() as usize + 1;
         let diag = ((width * width + height * height) as f64).sqrt().ceil();
         let n_rho = 2 * diag as usize + 3;
@@ -86,6 +95,10 @@ impl Hough {
         self.acc.resize(3 * n_psi * n_rho, 0);
         self.smooth.clear();
         self.smooth.resize(3 * n_psi * n_rho, 0);
+        self.votes_span.clear();
+        self.votes_span.resize(3 * n_psi, (usize::MAX, 0));
+        self.smooth_span.clear();
+        self.smooth_span.resize(3 * n_psi, (usize::MAX, 0));
         self.peaks.reserve(3 * PEAKS_PER_EDGE);
     }
 
@@ -96,9 +109,21 @@ impl Hough {
     /// Votes every edge point into the accumulators of the edges its polarity allows.
     /// `noise` is the gradient noise; weaker pixels get a wider direction tolerance.
     pub fn vote(&mut self, points: &[EdgePoint], noise: f32) {
-        self.acc.iter_mut().for_each(|a| *a = 0);
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
-        for p in points {
+        for (row, span) in self.votes_span.iter_mut().enumerate() {
+            if span.0 <= span.1 {
+                self.acc[row * n_rho + span.0..=row * n_rho + span.1].fill(0);
+            }
+            *span = (usize::MAX, 0);
+        }
+        for v in &mut self.voters {
+            v.clear();
+            // Room for every pixel of the image: no growth after warm-up.
+            v.reserve(self.pixels);
+        }
+        // Offset so that bins are found by truncation of a positive number.
+        let rho_shift = (0.5 - self.rho_min) as f32;
+        for (index, p) in points.iter().enumerate() {
             let tol = (1.5 * noise / p.mag) as f64 + 1.5f64.to_radians();
             let tol = tol.clamp(2f64.to_radians(), 8f64.to_radians());
             for e in 0..3 {
@@ -106,6 +131,7 @@ impl Hough {
                 if psi.abs() > self.window_rad + tol {
                     continue;
                 }
+                self.voters[e].push(index as u32);
                 let lo = (((psi - tol - self.psi_min) / PSI_STEP_RAD).ceil()).max(0.0) as usize;
                 let hi = (((psi + tol - self.psi_min) / PSI_STEP_RAD).floor() as isize)
                     .min(n_psi as isize - 1);
@@ -113,9 +139,11 @@ impl Hough {
                     let k = k as usize;
                     let row = e * n_psi + k;
                     let rho = p.x * self.cos[row] + p.y * self.sin[row];
-                    let bin = (rho as f64 - self.rho_min).round() as usize;
+                    let bin = (rho + rho_shift) as usize;
                     let cell = &mut self.acc[row * n_rho + bin];
                     *cell = cell.saturating_add(1);
+                    let span = &mut self.votes_span[row];
+                    *span = (span.0.min(bin), span.1.max(bin));
                 }
             }
         }
@@ -125,22 +153,36 @@ impl Hough {
     pub fn find_peaks(&mut self) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         for row in 0..3 * n_psi {
-            let src = &self.acc[row * n_rho..(row + 1) * n_rho];
             let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
-            dst[0] = 0;
-            dst[n_rho - 1] = 0;
-            for i in 1..n_rho - 1 {
+            let old = self.smooth_span[row];
+            if old.0 <= old.1 {
+                dst[old.0..=old.1].fill(0);
+            }
+            let (lo, hi) = self.votes_span[row];
+            if lo > hi {
+                self.smooth_span[row] = (usize::MAX, 0);
+                continue;
+            }
+            // Votes never land in the first or last bin (rho_min has a margin).
+            let (a, b) = (lo.max(2) - 1, (hi + 1).min(n_rho - 2));
+            let src = &self.acc[row * n_rho..(row + 1) * n_rho];
+            for i in a..=b {
                 dst[i] = src[i - 1]
                     .saturating_add(src[i].saturating_mul(2))
                     .saturating_add(src[i + 1]);
             }
+            self.smooth_span[row] = (a, b);
         }
         self.peaks.clear();
         for e in 0..3 {
             let first = self.peaks.len();
             for k in 0..n_psi {
                 let row = e * n_psi + k;
-                for i in 2..n_rho - 2 {
+                let (a, b) = self.smooth_span[row];
+                if a > b {
+                    continue;
+                }
+                for i in a.max(2)..=b.min(n_rho - 3) {
                     let v = self.smooth[row * n_rho + i];
                     if v < MIN_VOTES || !self.is_local_max(e, k, i, v) {
                         continue;
@@ -207,6 +249,8 @@ mod tests {
                     x: x as f32,
                     y: y as f32,
                     angle: nrm as f32,
+                    ux: nrm.cos() as f32,
+                    uy: nrm.sin() as f32,
                     mag: 50.0,
                 }
             })

@@ -14,17 +14,26 @@
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
 use super::geometry::{clip_to_rect, dot, norm, rotate, sub, wrap_pi};
-use super::template::{Pose, Template};
+use super::template::{Pose, Template, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
 const SCALE_MIN: f64 = 0.05;
 const SCALE_MAX: f64 = 12.0;
-/// Log step of the scale scan for pairs.
+/// Log step of the scale scan for pairs, and the most steps from SCALE_MIN to SCALE_MAX.
 const SCALE_STEP: f64 = 1.03;
+const SCALE_STEPS_MAX: usize = 192;
 /// Smallest tip (apex to red line), detection pixels.
 const MIN_HEIGHT_PX: f64 = 10.0;
 /// Hypotheses kept for the full (walking) evaluation.
 const SHORTLIST: usize = 10;
+/// A line of a hypothesis must cover at least this much of its predicted segment.
+const MIN_MEMBER_PX: f64 = 3.0;
+const MIN_MEMBER_FRACTION: f64 = 0.4;
+/// Red is scored only this many tip heights beyond the start of the beam's bend: further
+/// back the beam may curve away from the tip's tangent.
+const RED_SCORE_HEIGHTS: f64 = 1.5;
+/// Weight of the beam edge's coverage in a hypothesis' score (see [`edge_score`]).
+const RED_WEIGHT: f64 = 0.5;
 /// Gradient tolerance when walking a predicted edge, radians.
 const WALK_ANGLE_RAD: f64 = 0.25;
 
@@ -36,9 +45,6 @@ pub struct Coverage {
     pub visible: f64,
     /// Supported length just past the corner end (should be none).
     pub overshoot: f64,
-    /// Supported length past an open far end (the beam going on towards its clamp
-    /// beyond what the reference showed): evidence, but its absence is no penalty.
-    pub beyond: f64,
 }
 
 impl Coverage {
@@ -50,9 +56,25 @@ impl Coverage {
         }
     }
 
+    /// Supported minus unsupported length, minus twice any overshoot: the log-likelihood
+    /// ratio of "tip edge" against "background" for equally reliable edge pixels.
     fn score(&self) -> f64 {
-        2.0 * self.supported - self.visible - 2.0 * self.overshoot + self.beyond
+        2.0 * self.supported - self.visible - 2.0 * self.overshoot
     }
+}
+
+/// An edge's share of a hypothesis' score. The beam edge counts half: it is a long line
+/// whatever the hypothesis, so its length says little about where the tip is.
+fn edge_score(e: usize, c: &Coverage) -> f64 {
+    if e == RED {
+        RED_WEIGHT * c.score()
+    } else {
+        c.score()
+    }
+}
+
+fn total_score(cov: &[Coverage; 3]) -> f64 {
+    (0..3).map(|e| edge_score(e, &cov[e])).sum()
 }
 
 /// A placed tip and its evidence.
@@ -64,7 +86,24 @@ pub struct Hypothesis {
     pub members: [Option<usize>; 3],
     pub coverage: [Coverage; 3],
     pub score: f64,
+    /// For a pair: the scales that explain the pair equally well (the apex moves along
+    /// `apex0 + scale * apex1`); the edge left out decides among them.
+    pub plateau: Option<Plateau>,
 }
+
+/// Scales over which a pair hypothesis scores the same.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plateau {
+    pub apex0: [f64; 2],
+    pub apex1: [f64; 2],
+    pub scale_lo: f64,
+    pub scale_hi: f64,
+}
+
+/// Scales tried along a plateau when placing the edge a pair leaves out.
+const PLATEAU_STEPS: usize = 10;
+/// Scores within this of the best belong to its plateau.
+const PLATEAU_TOL: f64 = 1.0;
 
 /// Reusable state of the search.
 #[derive(Debug, Default)]
@@ -89,6 +128,7 @@ impl Search {
         prior: Option<Prior>,
     ) -> Option<Hypothesis> {
         self.shortlist.clear();
+        self.shortlist.reserve(SHORTLIST);
         let list = &cands.list;
         let n = list.len();
         let size = [edges.width as f64, edges.height as f64];
@@ -108,12 +148,7 @@ impl Search {
         }
         let mut best: Option<Hypothesis> = None;
         for h in &mut self.shortlist {
-            for e in 0..3 {
-                if h.members[e].is_none() {
-                    h.coverage[e] = walk(template, &h.pose, e, edges);
-                }
-            }
-            h.score = h.coverage.iter().map(Coverage::score).sum();
+            place_missing(template, h, edges);
             if best.is_none_or(|b| h.score > b.score) {
                 best = Some(*h);
             }
@@ -151,9 +186,13 @@ impl Search {
             for (e, m) in members.iter().enumerate() {
                 if let Some(i) = m {
                     cov[e] = cover(t, pose, e, cands, &list[*i]);
+                    // Every line of a hypothesis must be part of the tip it proposes.
+                    if cov[e].visible < MIN_MEMBER_PX || cov[e].fraction() < MIN_MEMBER_FRACTION {
+                        return None;
+                    }
                 }
             }
-            Some((cov, cov.iter().map(Coverage::score).sum()))
+            Some((cov, total_score(&cov)))
         };
         let mut rows = [LineRow::default(); 3];
         for (r, &i) in rows.iter_mut().zip(idx) {
@@ -162,17 +201,18 @@ impl Search {
         let best = if idx.len() == 3 {
             solve3(&rows).and_then(|(apex, scale)| {
                 let pose = Pose { psi, scale, apex };
-                partial(&pose).map(|(cov, s)| (pose, cov, s))
+                partial(&pose).map(|(cov, s)| (pose, cov, s, None))
             })
         } else {
             scan_scale(&rows[..2], psi, partial)
         };
-        if let Some((pose, coverage, score)) = best {
+        if let Some((pose, coverage, score, plateau)) = best {
             self.shortlist_insert(Hypothesis {
                 pose,
                 members,
                 coverage,
                 score,
+                plateau,
             });
         }
     }
@@ -265,7 +305,7 @@ fn scan_scale(
     r: &[LineRow],
     psi: f64,
     score: impl Fn(&Pose) -> Option<([Coverage; 3], f64)>,
-) -> Option<(Pose, [Coverage; 3], f64)> {
+) -> Option<(Pose, [Coverage; 3], f64, Option<Plateau>)> {
     let det = r[0].normal[0] * r[1].normal[1] - r[0].normal[1] * r[1].normal[0];
     if det.abs() < 0.05 {
         return None;
@@ -279,18 +319,81 @@ fn scan_scale(
     let a0 = solve(r[0].rho, r[1].rho);
     let a1 = solve(-r[0].offset, -r[1].offset);
     let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
-    let mut scale = SCALE_MIN;
-    while scale <= SCALE_MAX {
+    let mut scores = [f64::NEG_INFINITY; SCALE_STEPS_MAX];
+    let mut best_k = 0;
+    for (k, slot) in scores.iter_mut().enumerate() {
+        let scale = SCALE_MIN * SCALE_STEP.powi(k as i32);
+        if scale > SCALE_MAX {
+            break;
+        }
         let apex = [a0[0] + scale * a1[0], a0[1] + scale * a1[1]];
         let pose = Pose { psi, scale, apex };
         if let Some((cov, s)) = score(&pose) {
+            *slot = s;
             if best.as_ref().is_none_or(|b| s > b.2 + 1e-9) {
                 best = Some((pose, cov, s));
+                best_k = k;
             }
         }
-        scale *= SCALE_STEP;
     }
-    best
+    let (pose, cov, s) = best?;
+    let (mut lo, mut hi) = (best_k, best_k);
+    while lo > 0 && scores[lo - 1] >= s - PLATEAU_TOL {
+        lo -= 1;
+    }
+    while hi + 1 < SCALE_STEPS_MAX && scores[hi + 1] >= s - PLATEAU_TOL {
+        hi += 1;
+    }
+    let plateau = Plateau {
+        apex0: a0,
+        apex1: a1,
+        scale_lo: SCALE_MIN * SCALE_STEP.powi(lo as i32),
+        scale_hi: SCALE_MIN * SCALE_STEP.powi(hi as i32),
+    };
+    Some((pose, cov, s, Some(plateau)))
+}
+
+/// Scores the edges a hypothesis left out where it puts them (directly on the edge
+/// map), choosing for a pair the scale along its plateau that explains them best.
+fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
+    let missing = |h: &Hypothesis, pose: &Pose| -> [Option<Coverage>; 3] {
+        std::array::from_fn(|e| h.members[e].is_none().then(|| walk(t, pose, e, edges)))
+    };
+    let total = |h: &Hypothesis, cov: &[Option<Coverage>; 3]| -> f64 {
+        (0..3)
+            .map(|e| edge_score(e, &cov[e].unwrap_or(h.coverage[e])))
+            .sum()
+    };
+    let mut best_pose = h.pose;
+    let mut best_cov = missing(h, &h.pose);
+    let mut best = total(h, &best_cov);
+    if let Some(p) = h.plateau.filter(|p| p.scale_hi > p.scale_lo * SCALE_STEP) {
+        let ratio = p.scale_hi / p.scale_lo;
+        for k in 0..=PLATEAU_STEPS {
+            let scale = p.scale_lo * ratio.powf(k as f64 / PLATEAU_STEPS as f64);
+            let apex = [
+                p.apex0[0] + scale * p.apex1[0],
+                p.apex0[1] + scale * p.apex1[1],
+            ];
+            let pose = Pose {
+                scale,
+                apex,
+                ..h.pose
+            };
+            let cov = missing(h, &pose);
+            let s = total(h, &cov);
+            if s > best + 1e-9 {
+                (best, best_pose, best_cov) = (s, pose, cov);
+            }
+        }
+    }
+    h.pose = best_pose;
+    for (cov, found) in h.coverage.iter_mut().zip(best_cov) {
+        if let Some(c) = found {
+            *cov = c;
+        }
+    }
+    h.score = best;
 }
 
 /// Whether a pose could be a tip in this image: big enough to see, and with its apex
@@ -308,11 +411,21 @@ fn end_margin(length: f64) -> f64 {
     1.5 + 0.05 * length
 }
 
+/// The stretch of edge `e` a hypothesis is scored on (red: only near the tip).
+fn segment(t: &Template, pose: &Pose, e: usize) -> ([f64; 2], [f64; 2]) {
+    if e == RED {
+        let (a, b) = t.red_near_tip(RED_SCORE_HEIGHTS);
+        let red = &t.edges[RED];
+        (t.place(pose, red.point(a)), t.place(pose, red.point(b)))
+    } else {
+        t.segment(pose, e)
+    }
+}
+
 /// Coverage of edge `e`'s predicted segment by candidate `c`'s profile.
 fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate) -> Coverage {
-    let edge = &t.edges[e];
-    let (tip, far) = t.segment(pose, e);
-    let length = edge.length() * pose.scale;
+    let (tip, far) = segment(t, pose, e);
+    let length = norm(sub(far, tip));
     let t_tip = Candidates::t_of(c, tip);
     let t_far = Candidates::t_of(c, far);
     let dir = (t_far - t_tip).signum();
@@ -320,18 +433,10 @@ fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate)
     let (supported, visible) = cands.support(c, t_tip + dir * m, t_far - dir * m);
     let zone = 0.3 * length + 2.0;
     let (overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
-    // Capped by the visible part: the beam alone, without its tip in view, is no tip.
-    let beyond = if edge.far_open {
-        let (b, _) = cands.support(c, t_far - dir * m, t_far + dir * 2.0 * length);
-        b.min(visible)
-    } else {
-        0.0
-    };
     Coverage {
         supported,
         visible,
         overshoot,
-        beyond,
     }
 }
 
@@ -340,7 +445,7 @@ fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate)
 fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
     let line = t.line(pose, e);
     let normal_angle = line.normal[1].atan2(line.normal[0]);
-    let (tip, far) = t.segment(pose, e);
+    let (tip, far) = segment(t, pose, e);
     let length = norm(sub(far, tip));
     if length < 1.0 {
         return Coverage::default();

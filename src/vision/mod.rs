@@ -11,15 +11,19 @@
 //! - `hypothesis`: the rigid-tip search: pairs and triples of lines that agree on one
 //!   rotation and form the reference triangle at some scale, scored by how well they
 //!   cover the predicted segments (a clutter line cannot win an edge on its own);
+//! - `bands`: which stretch of each edge the grey-level fit uses (shared with calibration);
 //! - `refine`: sub-pixel, sub-0.1 degree fit of one shared rotation on the full-resolution
 //!   grey levels, with a bend term for the curved beam edge;
-//! - `tracker`: the per-frame driver, verification, confidence and coherence;
+//! - `verify`: is it the tip (contrast of every edge in view, a bright pyramid, a
+//!   precise rotation), and the confidence;
+//! - `tracker`: the per-frame driver and coherence;
 //! - `calibration`: the template learned from the reference image and clicked pixels;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
 //!
 //! Conventions are scene.md's: pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
 
+mod bands;
 mod calibration;
 mod candidates;
 mod edges;
@@ -31,6 +35,7 @@ mod pyramid;
 mod refine;
 mod template;
 mod tracker;
+mod verify;
 
 use std::fmt;
 
@@ -116,6 +121,8 @@ pub struct Estimate {
     pub apex_px: Option<[f64; 2]>,
     /// Per edge, indexed by [`Edge::index`].
     pub edges: [Option<EdgeFit>; 3],
+    /// Standard error of `angle_deg` from the fit's noise, degrees.
+    pub angle_sigma_deg: Option<f64>,
     /// Frame pixels per reference pixel.
     pub scale: Option<f64>,
     /// In [0, 1]; `detected` requires it to pass the tracker's threshold.
@@ -134,6 +141,7 @@ impl Estimate {
             force_saturated: false,
             apex_px: None,
             edges: [None; 3],
+            angle_sigma_deg: None,
             scale: None,
             confidence,
             miss: Some(miss),

@@ -57,6 +57,9 @@ pub struct Template {
     /// Distance from the apex to the red line: the pyramid's height plus the beam's
     /// thickness, the natural unit of the tip's size.
     pub height: f64,
+    /// Position along red (as `tau`) of the back of the pyramid's base: the beam is
+    /// rigid (straight) from there to the free end, and bends beyond.
+    pub bend_tau: f64,
 }
 
 /// Where the template sits in a frame.
@@ -95,6 +98,15 @@ impl Template {
         )
     }
 
+    /// Red's stretch from the free end to `heights` tip heights beyond the start of the
+    /// bend (but not beyond its reference extent), as a `tau` interval (tip end first).
+    pub fn red_near_tip(&self, heights: f64) -> (f64, f64) {
+        let red = &self.edges[RED];
+        let dir = (red.far_tau - red.tip_tau).signum();
+        let span = (self.bend_tau - red.tip_tau).abs() + heights * self.height;
+        (red.tip_tau, red.tip_tau + dir * span.min(red.length()))
+    }
+
     /// Inward normal angles (image radians) of the three edges in the reference.
     pub fn normal_angles(&self) -> [f64; 3] {
         self.edges.map(|e| e.normal[1].atan2(e.normal[0]))
@@ -126,6 +138,7 @@ mod tests {
             ],
             apex: [100.0, 100.0],
             height: 50.0,
+            bend_tau: 20.0,
         }
     }
 

@@ -9,29 +9,36 @@
 
 use image::GrayImage;
 
+use super::bands::{bands, bend_prior, refined_pose, visible_segment};
 use super::calibration::Calibration;
 use super::candidates::Candidates;
 use super::edges::EdgeMap;
-use super::geometry::{add, clip_to_rect, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
+use super::geometry::screen_deg_from_image_rad;
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
-use super::refine::{Band, FitResult, Refiner};
-use super::template::{Pose, Template, BLUE, GREEN, RED};
-use super::{EdgeFit, Estimate, Miss};
+use super::refine::{half_width, Band, FitResult, Refiner};
+use super::template::{Pose, Template};
+use super::verify::{self, Evidence, MIN_CONFIDENCE};
+use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::config::{Threshold, TrackerConfig};
 use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
 const COHERENT_TOL_RAD: f64 = 0.07;
-/// How much of the beam edge (in tip heights from the free end) is fitted: all of it
-/// that is in view, in practice; the bend term takes care of its curvature.
-const RED_SPAN_HEIGHTS: f64 = 60.0;
-/// Shortest band worth fitting, frame pixels.
-const MIN_BAND_PX: f64 = 10.0;
-/// Smallest confidence reported as a detection.
-const MIN_CONFIDENCE: f64 = 0.5;
+/// An edge fitted at less than this share of its calibrated contrast is left out of the
+/// final fit when two others hold (a particle or scratch sitting on it).
+const DROP_CONTRAST_RATIO: f64 = 0.4;
 
+/// Per-edge flags.
+type Vec3Mask = [bool; 3];
+
+/// Blur (pixels) the coarse fit's bands are sized for, at least: SEM frames range from
+/// 0.8 to 1.6 (scene.md).
+const START_BLUR_PX: f64 = 1.4;
+
+/// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
+const CONFIRMED_FRACTION: f64 = 0.5;
 /// The last confident estimate, for coherence.
 #[derive(Debug, Clone, Copy)]
 struct Last {
@@ -47,7 +54,6 @@ pub struct Tracker {
     cantilever: Option<Cantilever>,
     coherence: bool,
     last: Option<Last>,
-    blur: f64,
     pyr: Pyramid,
     edges: EdgeMap,
     hough: Hough,
@@ -66,7 +72,6 @@ impl Tracker {
         Tracker {
             threshold: cfg.threshold,
             window_rad: cfg.window_deg.to_radians(),
-            blur: calibration.blur_px(),
             calibration,
             cantilever,
             coherence: true,
@@ -109,6 +114,7 @@ impl Tracker {
         self.cands.build(
             &self.hough.peaks,
             &self.edges.points,
+            &self.hough.voters,
             template.normal_angles(),
             [w, h],
         );
@@ -144,7 +150,7 @@ impl Tracker {
         prior: Option<Prior>,
     ) -> Option<Estimate> {
         if self.cands.list.len() < 2 {
-            return None;
+            return Some(Estimate::missed(Miss::NoCandidates, 0.0));
         }
         let Some(hyp) = self.search.run(t, &self.cands, &self.edges, prior) else {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
@@ -157,6 +163,22 @@ impl Tracker {
         if found < 2 || hyp.score <= 0.0 {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
         }
+        let Some((pose, fit, bands)) = self.refine(frame, t, &hyp) else {
+            return Some(Estimate::missed(Miss::LowConfidence, 0.0));
+        };
+        Some(self.verdict(frame, t, &hyp, &pose, &fit, &bands))
+    }
+
+    /// The grey-level fit of a hypothesis: a coarse pass on bands placed from the search,
+    /// a final pass on bands placed from the coarse lines, and if an edge turns out far
+    /// fainter than calibrated (something sitting on it) while two others hold, a last
+    /// pass without it.
+    fn refine(
+        &mut self,
+        frame: &GrayImage,
+        t: &Template,
+        hyp: &Hypothesis,
+    ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
         let k = self.pyr.factor as f64;
         let pose = Pose {
             psi: hyp.pose.psi,
@@ -164,37 +186,82 @@ impl Tracker {
             apex: self.pyr.to_frame(hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
-        let first = bands(t, &pose, size, self.blur);
-        let fit = self.refiner.fit(frame, &first, true, self.blur)?;
-        // Second pass on bands placed from the refined lines.
+        // Fit the edges the search found: its lines, and a left-out edge only where the
+        // edge map confirms it (a pair leaves the scale, hence that edge, uncertain).
+        let mut keep: [bool; 3] = std::array::from_fn(|e| {
+            hyp.members[e].is_some() || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
+        });
+        let only = |b: [Option<Band>; 3], keep: &[bool; 3]| -> [Option<Band>; 3] {
+            std::array::from_fn(|e| b[e].filter(|_| keep[e]))
+        };
+        let prior = bend_prior(t, &pose, self.cantilever, 0.0);
+        // Every frame starts from the same blur guess (wide enough for the blurriest
+        // frames; the coarse pass measures it): nothing carries over from the frame
+        // before, so the result does not depend on the order of frames.
+        let blur0 = self.calibration.blur_px().max(START_BLUR_PX);
+        let first = only(bands(t, &pose, size, blur0, prior), &keep);
+        let fit = self.refiner.fit(frame, &first, true, blur0, true)?;
+        let blur = fit.blur.clamp(0.5, 3.0);
         let pose = refined_pose(t, &pose, &fit);
-        let bands = bands(t, &pose, size, self.blur);
-        let fit = self.refiner.fit(frame, &bands, true, fit.blur)?;
+        let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
+        let mut bands = only(bands(t, &pose, size, blur, prior), &keep);
+        let mut fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+        let ratio = |fit: &FitResult, e: usize| {
+            fit.edges[e].map_or(0.0, |r| {
+                r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
+            })
+        };
+        let fitted: Vec3Mask =
+            std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some());
+        let weak: Vec3Mask =
+            std::array::from_fn(|e| fitted[e] && ratio(&fit, e) < DROP_CONTRAST_RATIO);
+        let strong = (0..3).filter(|&e| fitted[e] && !weak[e]).count();
+        if weak.iter().any(|&w| w) && strong >= 2 {
+            for e in 0..3 {
+                keep[e] &= !weak[e];
+            }
+            bands = only(bands, &keep);
+            fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+        }
         let pose = refined_pose(t, &pose, &fit);
-        Some(self.verdict(t, &hyp, &pose, &fit, &bands, size))
+        Some((pose, fit, bands))
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn verdict(
         &mut self,
+        frame: &GrayImage,
         t: &Template,
         hyp: &Hypothesis,
         pose: &Pose,
         fit: &FitResult,
         bands: &[Option<Band>; 3],
-        size: [f64; 2],
     ) -> Estimate {
+        let size = [frame.width() as f64, frame.height() as f64];
+        let in_view = bands.map(|b| b.is_some());
+        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let (sup, vis) = hyp
+            .coverage
+            .iter()
+            .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
+        let margin = half_width(fit.blur);
+        let interior = verify::interior_median(frame, t, pose, margin)
+            .map_or(0.0, |m| verify::interior_position(fit, m));
+        let evidence = Evidence {
+            coverage: if vis > 0.0 { sup / vis } else { 0.0 },
+            contrast_ratio: verify::contrast_ratio(fit, &in_view, &calibrated),
+            interior,
+            turn_sigma_deg: fit.turn_sigma.to_degrees(),
+        };
+        let confidence = evidence.confidence();
+        if confidence < MIN_CONFIDENCE {
+            return Estimate::missed(Miss::LowConfidence, confidence);
+        }
         let mut edges = [None; 3];
-        let mut strong = 0;
-        let mut snr_min = f64::INFINITY;
         for e in 0..3 {
-            let (Some(r), Some(_)) = (fit.edges[e], bands[e]) else {
+            let (Some(r), true) = (fit.edges[e], in_view[e]) else {
                 continue;
             };
-            let snr = r.contrast / r.noise;
-            if r.contrast > 8.0 && snr > 0.8 {
-                strong += 1;
-                snr_min = snr_min.min(snr);
-            }
             let (a, b) = visible_segment(t, pose, e, size).unwrap_or((pose.apex, pose.apex));
             edges[e] = Some(EdgeFit {
                 start_px: r.line.foot(a),
@@ -203,26 +270,6 @@ impl Tracker {
                 contrast: r.contrast,
             });
         }
-        let (sup, vis) = hyp
-            .coverage
-            .iter()
-            .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
-        let coverage = if vis > 0.0 { sup / vis } else { 0.0 };
-        let precision = (-(fit.turn_sigma.to_degrees() / 0.3)).exp();
-        let confidence = (coverage * precision * (snr_min / 2.0).min(1.0)).clamp(0.0, 1.0);
-        if std::env::var("NF_DEBUG").is_ok() {
-            eprintln!("verdict: coverage {coverage:.3} turn_sigma {:.3} deg snr_min {snr_min:.2} strong {strong}", fit.turn_sigma.to_degrees());
-            for r in fit.edges.iter().flatten() {
-                eprintln!(
-                    "   contrast {:.1} noise {:.1} samples {} level {:.1}",
-                    r.contrast, r.noise, r.samples, r.level
-                );
-            }
-        }
-        if strong < 2 || confidence < MIN_CONFIDENCE {
-            return Estimate::missed(Miss::LowConfidence, confidence);
-        }
-        self.blur = fit.blur.clamp(0.5, 3.0);
         let angle_deg = screen_deg_from_image_rad(pose.psi);
         let force = self.cantilever.map(|c| c.force_nn(angle_deg));
         Estimate {
@@ -232,246 +279,10 @@ impl Tracker {
             force_saturated: force.is_some_and(|f| f.saturated),
             apex_px: Some(pose.apex),
             edges,
+            angle_sigma_deg: Some(fit.turn_sigma.to_degrees()),
             scale: Some(pose.scale),
             confidence,
             miss: None,
-        }
-    }
-}
-
-/// Half-width of the fitted band for a blur, pixels (matches `refine`).
-fn half_width(blur: f64) -> f64 {
-    2.5 * blur + 2.5
-}
-
-/// The part of edge `e`'s predicted segment inside the frame: (corner side, far side).
-fn visible_segment(
-    t: &Template,
-    pose: &Pose,
-    e: usize,
-    size: [f64; 2],
-) -> Option<([f64; 2], [f64; 2])> {
-    let (tip, far) = t.segment(pose, e);
-    let len = sub(far, tip)[0].hypot(sub(far, tip)[1]);
-    if len < 1e-9 {
-        return None;
-    }
-    let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
-    let (a, b) = clip_to_rect(tip, dir, [0.0, 0.0], [size[0] - 1.0, size[1] - 1.0])?;
-    let (a, b) = (a.max(0.0), b.min(len));
-    (b > a).then(|| {
-        (
-            [tip[0] + a * dir[0], tip[1] + a * dir[1]],
-            [tip[0] + b * dir[0], tip[1] + b * dir[1]],
-        )
-    })
-}
-
-/// Bands for the grey-level fit from a pose: each edge's predicted segment, trimmed
-/// at the corners, limited (beam edge) to a few tip heights, clipped to the frame.
-fn bands(t: &Template, pose: &Pose, size: [f64; 2], blur: f64) -> [Option<Band>; 3] {
-    let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
-    let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
-    let reach = half_width(blur) + 2.5 * blur;
-    let margin = 3.0;
-    let (lo_rect, hi_rect) = (
-        [margin, margin],
-        [size[0] - 1.0 - margin, size[1] - 1.0 - margin],
-    );
-    std::array::from_fn(|e| {
-        let line = t.line(pose, e);
-        let (tip, far) = t.segment(pose, e);
-        let full = norm(sub(far, tip));
-        if full < 1.0 {
-            return None;
-        }
-        let dir = scale(sub(far, tip), 1.0 / full);
-        let len = if e == RED {
-            RED_SPAN_HEIGHTS * t.height * pose.scale
-        } else {
-            full
-        };
-        let trim_corner = if e == RED { reach } else { reach / sin_apex };
-        let (a, b) = clip_to_rect(tip, dir, lo_rect, hi_rect)?;
-        let (a, b) = (a.max(trim_corner), b.min(len - 1.5 * reach));
-        if b - a < MIN_BAND_PX {
-            return None;
-        }
-        let at = |s: f64| line.foot(add(tip, scale(dir, s)));
-        Some(Band {
-            start: at(a),
-            end: at(b),
-            line,
-            bend_from: (e == RED).then(|| line.foot(tip)),
-        })
-    })
-}
-
-/// The pose implied by the fitted lines: the fitted rotation, the apex where blue meets
-/// green (else kept consistent with the lines that were fitted), the scale from red.
-fn refined_pose(t: &Template, pose: &Pose, fit: &FitResult) -> Pose {
-    let psi = pose.psi + fit.turn;
-    let line = |e: usize| fit.edges[e].map(|r| r.line);
-    let mut out = Pose { psi, ..*pose };
-    match (line(BLUE), line(GREEN), line(RED)) {
-        (Some(b), Some(g), red) => {
-            if let Some(apex) = b.intersect(&g) {
-                out.apex = apex;
-                if let Some(r) = red {
-                    let s = (r.rho - dot(r.normal, apex)) / t.edges[RED].offset;
-                    if s > 0.0 {
-                        out.scale = s;
-                    }
-                }
-            }
-        }
-        (b, g, Some(r)) => {
-            // One pyramid face and the beam: keep the scale, move the apex onto both lines.
-            let face = b.map(|l| (l, BLUE)).or(g.map(|l| (l, GREEN)));
-            if let Some((l, _)) = face {
-                let shifted = Line {
-                    normal: r.normal,
-                    rho: r.rho - out.scale * t.edges[RED].offset,
-                };
-                if let Some(apex) = l.intersect(&shifted) {
-                    out.apex = apex;
-                }
-            }
-        }
-        _ => {}
-    }
-    out
-}
-
-#[cfg(test)]
-mod debug_tests {
-    use super::*;
-    use crate::config::Config;
-    use std::path::Path;
-
-    #[test]
-    #[ignore]
-    fn per_edge_turns_on_samples() {
-        for name in ["mixed", "sequence"] {
-            let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data/samples")
-                .join(name);
-            let cfg = Config::load(&dir.join("probe.toml")).unwrap();
-            let cal_cfg = cfg.tracker.calibration.clone().unwrap();
-            let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
-            let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
-            let mut tr = Tracker::new(&cfg.tracker, cal, None);
-            tr.set_coherence(false);
-            let truth = std::fs::read_to_string(dir.join("truth.csv")).unwrap();
-            for line in truth.lines().skip(1) {
-                let v: Vec<&str> = line.split(',').collect();
-                let f = v[0];
-                let angle: f64 = v[2].parse().unwrap();
-                let frame = image::open(dir.join("frames").join(f)).unwrap().to_luma8();
-                let est = tr.track(&frame);
-                let Some(a) = est.angle_deg else {
-                    println!("{name} {f} {angle:+.3} {} {} missed", v[6], v[8]);
-                    continue;
-                };
-                let t = *tr.calibration.template();
-                let psi = -a.to_radians();
-                let pose = Pose {
-                    psi,
-                    scale: est.scale.unwrap(),
-                    apex: est.apex_px.unwrap(),
-                };
-                let size = [frame.width() as f64, frame.height() as f64];
-                let b = bands(&t, &pose, size, tr.blur);
-                let fit = tr.refiner.fit(&frame, &b, false, tr.blur).unwrap();
-                print!(
-                    "{name} {f} {angle:+8.3} {:5} {:8} joint {:+.3}",
-                    v[6],
-                    v[8],
-                    a - angle
-                );
-                for e in 0..3 {
-                    match fit.edges[e] {
-                        Some(r) => print!(
-                            " e{e} {:+.3} ({:4})",
-                            screen_deg_from_image_rad(psi + r.turn) - angle,
-                            r.samples
-                        ),
-                        None => print!(" e{e}    -          "),
-                    }
-                }
-                println!(" bend {:.2}", fit.bend);
-                if std::env::var("NF_BANDS").is_ok() {
-                    for band in b.iter().flatten() {
-                        println!(
-                            "   band {:.1},{:.1} {:.1},{:.1}",
-                            band.start[0], band.start[1], band.end[0], band.end[1]
-                        );
-                    }
-                }
-            }
-        }
-    }
-}
-
-#[cfg(test)]
-mod debug_frame {
-    use super::*;
-    use crate::config::Config;
-    use std::path::Path;
-
-    #[test]
-    #[ignore]
-    fn explain_frame() {
-        let name = std::env::var("SAMPLE").unwrap_or("mixed".into());
-        let frames = std::env::var("FRAMES").unwrap_or("frame_00011.png".into());
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/samples")
-            .join(name);
-        let cfg = Config::load(&dir.join("probe.toml")).unwrap();
-        let cal_cfg = cfg.tracker.calibration.clone().unwrap();
-        let reference = image::open(&cal_cfg.reference_image).unwrap().to_luma8();
-        let cal = Calibration::from_reference(&reference, &cal_cfg, &cfg.tracker).unwrap();
-        let mut tr = Tracker::new(&cfg.tracker, cal, None);
-        tr.set_coherence(false);
-        for f in frames.split(',') {
-            let frame = image::open(dir.join("frames").join(f)).unwrap().to_luma8();
-            let est = tr.track(&frame);
-            println!("{f}: {est:?}");
-            println!(
-                "  threshold {:.1} noise {:.2} points {}",
-                tr.pyr.threshold(tr.threshold),
-                tr.edges.noise,
-                tr.edges.points.len()
-            );
-            for c in &tr.cands.list {
-                println!(
-                    "  cand e{} psi {:+.2} sigma {:.2} count {} centroid {:.1},{:.1}",
-                    c.edge,
-                    -c.psi.to_degrees(),
-                    c.psi_sigma.to_degrees(),
-                    c.count,
-                    c.centroid[0],
-                    c.centroid[1]
-                );
-            }
-            let t = *tr.calibration.template();
-            if let Some(h) = tr.search.run(&t, &tr.cands, &tr.edges, None) {
-                println!(
-                    "  best: psi {:+.2} scale {:.3} apex {:.1},{:.1} members {:?} score {:.1}",
-                    -h.pose.psi.to_degrees(),
-                    h.pose.scale,
-                    h.pose.apex[0],
-                    h.pose.apex[1],
-                    h.members,
-                    h.score
-                );
-                for c in h.coverage {
-                    println!(
-                        "    cov sup {:.1} vis {:.1} over {:.1}",
-                        c.supported, c.visible, c.overshoot
-                    );
-                }
-            }
         }
     }
 }

@@ -229,3 +229,101 @@ pub fn table(truth: &[Truth], est: &[Estimate]) -> String {
     }
     out
 }
+
+/// A rendered session (see `nanoforce::scene`) tracked frame by frame.
+pub mod rendered {
+    use super::Truth;
+    use image::GrayImage;
+    use nanoforce::config::{CalibrationConfig, TrackerConfig};
+    use nanoforce::scene::{render, render_into, Segment, Session};
+    use nanoforce::vision::{Calibration, Estimate, Tracker};
+
+    /// The tracker settings and calibration clicks the session's probe.toml would hold.
+    /// The scene's click generator can put red clicks beyond the frame when the beam
+    /// leaves it steeply; a person cannot click there, so such clicks are dropped, and
+    /// if fewer than two remain, the person clicks (to within +-0.5 px) at a quarter,
+    /// half and three quarters of the true edge's part in view.
+    pub fn tracker_config(session: &Session) -> TrackerConfig {
+        let clicks = session.clicks();
+        let (w, h) = (
+            session.reference.width as f64,
+            session.reference.height as f64,
+        );
+        let inside =
+            |p: &[f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
+        let (_, truth) = render(&session.reference);
+        let edges = truth.edges.expect("the reference shows the probe");
+        let fix = |v: Vec<[f64; 2]>, seg: Segment, k: u64| -> Vec<[f64; 2]> {
+            let kept: Vec<[f64; 2]> = v.into_iter().filter(inside).collect();
+            if kept.len() >= 2 {
+                return kept;
+            }
+            let at = |t: f64| {
+                [
+                    seg.from[0] + t * (seg.to[0] - seg.from[0]),
+                    seg.from[1] + t * (seg.to[1] - seg.from[1]),
+                ]
+            };
+            let ts: Vec<f64> = (0..=100)
+                .map(|i| i as f64 / 100.0)
+                .filter(|&t| inside(&at(t)))
+                .collect();
+            let (t0, t1) = (ts[0], ts[ts.len() - 1]);
+            [0.25, 0.5, 0.75]
+                .iter()
+                .enumerate()
+                .map(|(i, f)| {
+                    let p = at(t0 + f * (t1 - t0));
+                    let j = ((k * 7 + i as u64 * 3) % 11) as f64 / 10.0 - 0.5;
+                    [
+                        (10.0 * (p[0] + j)).round() / 10.0,
+                        (10.0 * (p[1] - j)).round() / 10.0,
+                    ]
+                })
+                .collect()
+        };
+        TrackerConfig {
+            threshold: session.threshold,
+            window_deg: session.window_deg,
+            calibration: Some(CalibrationConfig {
+                reference_image: "reference.png".into(),
+                red: fix(clicks.red, edges.red, 1),
+                blue: fix(clicks.blue, edges.blue, 2),
+                green: fix(clicks.green, edges.green, 3),
+            }),
+        }
+    }
+
+    pub fn calibrate(session: &Session) -> (TrackerConfig, Calibration) {
+        let cfg = tracker_config(session);
+        let mut reference = GrayImage::new(1, 1);
+        render_into(&session.reference, &mut reference);
+        let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
+            .expect("rendered reference calibrates");
+        (cfg, cal)
+    }
+
+    /// Renders and tracks every frame of `session` in order.
+    pub fn run(session: &Session, coherence: bool) -> (Vec<Truth>, Vec<Estimate>) {
+        let (cfg, cal) = calibrate(session);
+        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+        tracker.set_coherence(coherence);
+        let mut frame = GrayImage::new(1, 1);
+        let mut truths = Vec::new();
+        let mut estimates = Vec::new();
+        for (k, spec) in session.frames.iter().enumerate() {
+            let t = render_into(spec, &mut frame);
+            estimates.push(tracker.track(&frame));
+            truths.push(Truth {
+                frame: format!("frame_{k:05}"),
+                detected: t.probe_in_view,
+                angle_deg: t.angle_deg,
+                force_nn: t.force_nn,
+                tip: [t.tip_x, t.tip_y],
+                magnification: t.magnification,
+                style: spec.look.style_name.to_string(),
+            });
+        }
+        (truths, estimates)
+    }
+}

@@ -3,24 +3,45 @@
 //! Thresholding and edge maps throw away where, inside a pixel, an edge lies; the grey
 //! levels keep it. Around each found edge a band of pixels is fitted with a blurred step
 //!
-//!     I(p) = level + slope * u + contrast * Phi(d(p) / blur),
-//!     d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
+//! ```text
+//! I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur),
+//! d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
+//! ```
 //!
-//! (`Phi` the normal CDF, `u` the position along the edge, for slow shading), by robust
-//! (Huber) Gauss-Newton. In tracking mode one rotation `psi` is shared by all edges,
-//! which is what a rigid tip means; in calibration mode each edge turns on its own.
-//! The beam edge is curved along the elastica: its offset from the free-end tangent
-//! grows as the cube of the distance `w` from the free end (the bending moment grows
-//! linearly from zero there), so a cubic term lets a long stretch of it pin down the
-//! end tangent instead of biasing it.
+//! (`Phi` the normal CDF, `u` the position along the edge, for slow shading and the
+//! probe's brightness ramp), by robust (Huber) Gauss-Newton. In tracking mode one
+//! rotation `psi` is shared by all edges, which is what a rigid tip means; in
+//! calibration mode each edge turns on its own. The beam edge is straight along the
+//! rigid block at its end and curves behind it along the elastica: its offset from the
+//! free-end tangent grows as the cube of the distance `w` behind the block (the bending
+//! moment grows linearly from there), so a cubic term, with a prior from the exact
+//! elastica (`bands::bend_prior`), lets a long stretch of beam pin the tangent down
+//! instead of biasing it. Stretches whose residuals stand out (a particle on the edge)
+//! are left out.
+//!
+//! `kernel` is the inner loop, `gauss` the tabulated normal CDF, `solve` the small
+//! dense algebra.
 
 use image::GrayImage;
 
-use super::geometry::{along, dot, norm, rotate, sub, Line};
+use super::geometry::{along, dot, rotate, sub, Line};
 
-/// Most samples per edge (longer bands are strided).
+mod gauss;
+mod kernel;
+mod solve;
+
+use solve::{apply, solve, variance, Normal};
+
+/// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
-const ITERATIONS: usize = 8;
+const MAX_SAMPLES_PER_EDGE_COARSE: usize = 400;
+/// Gauss-Newton iterations at most (final, coarse), of which the first few on every
+/// other pixel.
+const ITERATIONS: usize = 5;
+const ITERATIONS_COARSE: usize = 3;
+/// Converged when a step moves the rotation and every offset less than this.
+const DONE_TURN_RAD: f64 = 5e-6;
+const DONE_OFFSET_PX: f64 = 5e-3;
 /// Normalisation of the along-edge coordinates (keeps the normal equations balanced).
 const ALONG_UNIT_PX: f64 = 100.0;
 const N_PARAMS: usize = 8 + 3 * PHOTO;
@@ -40,9 +61,25 @@ pub struct Band {
     pub end: [f64; 2],
     /// Current line estimate (inward normal).
     pub line: Line,
-    /// For the beam edge: the free end, from which a cubic bend grows into the band.
+    /// For the beam edge: where the beam starts to bend (the back of the rigid block),
+    /// from which the cubic bend grows into the band.
     pub bend_from: Option<[f64; 2]>,
+    /// Expected bend: offset (pixels, along the inward normal) at [`BEND_UNIT_PX`] from
+    /// `bend_from`; the band follows the bent edge, and the fit starts from it.
+    pub bend0: f64,
+    /// Standard deviation of the prior on the bend around `bend0` (infinite: no prior).
+    pub bend_sigma: f64,
 }
+
+/// The outer part of a band (pixels) where only every other pixel is fitted.
+const LEVEL_ONLY_PX: f64 = 2.0;
+
+/// The band that may carry a bend (the beam edge).
+const RED_BAND: usize = 0;
+
+/// The bend coefficient is the offset of the beam edge from its free-end tangent at this
+/// distance beyond the start of the bend, pixels.
+pub const BEND_UNIT_PX: f64 = 100.0;
 
 /// What the fit found for one edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,6 +137,8 @@ const CHUNK_OUTLIER_RATIO: f64 = 1.7;
 #[derive(Debug)]
 pub struct Refiner {
     samples: Vec<Sample>,
+    /// The samples of each edge (contiguous).
+    ranges: [std::ops::Range<usize>; 3],
     chunk_ok: [bool; 3 * CHUNKS_PER_EDGE],
     chunk_sq: [f64; 3 * CHUNKS_PER_EDGE],
     chunk_n: [u32; 3 * CHUNKS_PER_EDGE],
@@ -109,6 +148,7 @@ impl Default for Refiner {
     fn default() -> Self {
         Refiner {
             samples: Vec::new(),
+            ranges: [0..0, 0..0, 0..0],
             chunk_ok: [true; 3 * CHUNKS_PER_EDGE],
             chunk_sq: [0.0; 3 * CHUNKS_PER_EDGE],
             chunk_n: [0; 3 * CHUNKS_PER_EDGE],
@@ -122,35 +162,50 @@ struct EdgeFrame {
     origin: [f64; 2],
     normal0: [f64; 2],
     corner: [f64; 2],
-    /// Distance from the corner to the far end of the band (the bend's unit).
-    reach: f64,
+    /// +1 or -1: the sign of the along-coordinate from the free end towards the clamp.
+    towards: f64,
     curved: bool,
 }
 
 impl Refiner {
-    /// Fits the bands on `frame`. `shared` ties the edges to one rotation.
+    /// Fits the bands on `frame`. `shared` ties the edges to one rotation; `coarse`
+    /// uses fewer pixels and iterations (to place the bands of the final fit).
     pub fn fit(
         &mut self,
         frame: &GrayImage,
         bands: &[Option<Band>; 3],
         shared: bool,
         blur0: f64,
+        coarse: bool,
     ) -> Option<FitResult> {
-        let half_width = 2.5 * blur0 + 2.5;
+        let half_width = half_width(blur0);
+        // The coarse pass starts far from the solution: its first iteration runs on
+        // every other pixel. The final pass starts from the coarse lines.
+        let (max_samples, iterations_max, subsampled) = if coarse {
+            (MAX_SAMPLES_PER_EDGE_COARSE, ITERATIONS_COARSE, 1)
+        } else {
+            (MAX_SAMPLES_PER_EDGE, ITERATIONS, 0)
+        };
         self.samples.clear();
+        // Each band is strided down to at most max_samples plus one line's worth.
+        self.samples.reserve(3 * (MAX_SAMPLES_PER_EDGE + 1024));
         let mut frames: [Option<EdgeFrame>; 3] = [None; 3];
         for (e, band) in bands.iter().enumerate() {
+            self.ranges[e] = 0..0;
             let Some(b) = band else { continue };
-            if self.collect(frame, e, b, half_width) < 12 {
+            let first = self.samples.len();
+            if self.collect(frame, e, b, half_width, max_samples) < 12 {
+                self.samples.truncate(first);
                 continue;
             }
+            self.ranges[e] = first..self.samples.len();
             let mid = [0.5 * (b.start[0] + b.end[0]), 0.5 * (b.start[1] + b.end[1])];
             let corner = b.bend_from.unwrap_or(b.start);
             frames[e] = Some(EdgeFrame {
                 origin: b.line.foot(mid),
                 normal0: b.line.normal,
                 corner: b.line.foot(corner),
-                reach: norm(sub(b.line.foot(mid), b.line.foot(corner))).max(1.0) * 2.0,
+                towards: dot(along(b.line.normal), sub(b.end, b.start)).signum(),
                 curved: b.bend_from.is_some(),
             });
         }
@@ -159,22 +214,33 @@ impl Refiner {
         }
         let mut x = [0.0; N_PARAMS];
         x[P_BLUR] = blur0;
+        x[P_BEND] = bands[RED_BAND].map_or(0.0, |b| b.bend0);
         self.init_photometry(&frames, &mut x);
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
         self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
-        for iter in 0..ITERATIONS {
-            let ne = self.normal_equations(&frames, &x, &noise, shared);
+        for iter in 0..iterations_max {
+            // The first iterations, far from the solution, on every other pixel.
+            let step = if iter < subsampled { 2 } else { 1 };
+            let mut ne = self.normal_equations(&frames, &x, &noise, shared, step);
+            if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
+                // The physics' expectation of the bend as one more observation, weighted
+                // like the pixels (whose sums the normal equations hold).
+                let n2 = ne.noise[RED_BAND].min(1e6).powi(2);
+                let weight = n2 / (b.bend_sigma * b.bend_sigma * step as f64);
+                ne.h[P_BEND][P_BEND] += weight;
+                ne.g[P_BEND] += weight * (b.bend0 - x[P_BEND]);
+            }
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
             apply(&mut x, &step);
-            if (1..=3).contains(&iter) {
+            if iter <= subsampled {
                 self.reject_chunks();
             }
-            let done =
-                step[P_TURN].abs() < 1e-7 && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < 1e-4);
+            let done = (P_TURN..P_TURN + 3).all(|k| step[k].abs() < DONE_TURN_RAD)
+                && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_OFFSET_PX);
             last = Some(ne);
-            if done && iter >= 2 {
+            if done && iter > subsampled {
                 break;
             }
         }
@@ -183,7 +249,14 @@ impl Refiner {
     }
 
     /// Adds edge `e`'s band pixels; returns how many.
-    fn collect(&mut self, frame: &GrayImage, e: usize, b: &Band, half_width: f64) -> usize {
+    fn collect(
+        &mut self,
+        frame: &GrayImage,
+        e: usize,
+        b: &Band,
+        half_width: f64,
+        max_samples: usize,
+    ) -> usize {
         let (w, h) = (frame.width() as f64, frame.height() as f64);
         let n = b.line.normal;
         let horizontal = n[1].abs() >= n[0].abs();
@@ -195,23 +268,42 @@ impl Refiner {
             return 0;
         }
         let across = half_width / n[j].abs();
+        let inner = (half_width - LEVEL_ONLY_PX) / n[j].abs();
         let per_line = (2.0 * across + 1.0).max(1.0);
         let lines = hi - lo + 1.0;
-        let stride = ((lines * per_line) / MAX_SAMPLES_PER_EDGE as f64)
-            .ceil()
-            .max(1.0) as usize;
+        let stride = ((lines * per_line) / max_samples as f64).ceil().max(1.0) as usize;
         let chunk_lines = (lines / CHUNKS_PER_EDGE as f64).ceil().max(CHUNK_MIN_LINES);
         let limit = [w, h][j] - 2.0;
         let before = self.samples.len();
         let raw = frame.as_raw();
         let width = frame.width() as usize;
+        // A bent beam edge: the band follows n . p = rho + bend0 * w^3.
+        let d = along(n);
+        let bend = b.bend_from.map(|from| {
+            let towards = dot(d, sub(b.end, b.start)).signum();
+            (dot(d, from), towards)
+        });
         let mut a = lo as i64;
         while a as f64 <= hi {
             // Centre of the band on this line: n_k * a + n_j * c = rho.
-            let centre = (b.line.rho - n[k] * a as f64) / n[j];
+            let mut centre = (b.line.rho - n[k] * a as f64) / n[j];
+            if let Some((u_from, towards)) = bend {
+                let p = if horizontal {
+                    [a as f64, centre]
+                } else {
+                    [centre, a as f64]
+                };
+                let w = (towards * (dot(d, p) - u_from)).max(0.0) / BEND_UNIT_PX;
+                centre += b.bend0 * w * w * w / n[j];
+            }
             let c0 = (centre - across).ceil().max(1.0) as i64;
             let c1 = (centre + across).floor().min(limit) as i64;
             for c in c0..=c1 {
+                // Pixels more than a couple of blurs from the edge only tell the levels:
+                // every other one (a checkerboard) is plenty for that.
+                if (c as f64 - centre).abs() > inner && (a + c) % 2 != 0 {
+                    continue;
+                }
                 let (px, py) = if horizontal { (a, c) } else { (c, a) };
                 let value = raw[py as usize * width + px as usize];
                 let local = (((a as f64 - lo) / chunk_lines) as usize).min(CHUNKS_PER_EDGE - 1);
@@ -277,98 +369,6 @@ impl Refiner {
         }
     }
 
-    fn normal_equations(
-        &mut self,
-        frames: &[Option<EdgeFrame>; 3],
-        x: &[f64; N_PARAMS],
-        noise: &[f64; 3],
-        shared: bool,
-    ) -> Normal {
-        let mut ne = Normal::default();
-        self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
-        self.chunk_n = [0; 3 * CHUNKS_PER_EDGE];
-        let mut sq = [0.0f64; 3];
-        let mut wsum = [0.0f64; 3];
-        let blur = x[P_BLUR];
-        let normals: [[f64; 2]; 3] = std::array::from_fn(|e| {
-            let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
-            frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
-        });
-        for s in &self.samples {
-            let e = s.edge as usize;
-            let Some(f) = &frames[e] else { continue };
-            let p = [s.x as f64, s.y as f64];
-            let n = normals[e];
-            let rel = sub(p, f.origin);
-            let u = dot(along(n), rel);
-            let w = if f.curved {
-                bend_coordinate(f, n, p)
-            } else {
-                0.0
-            };
-            let d = dot(n, rel) - x[P_OFFSET + e] - x[P_BEND] * w * w * w;
-            let z = d / blur;
-            let (cdf, pdf) = (normal_cdf(z), normal_pdf(z));
-            let ph = &x[P_PHOTO + PHOTO * e..P_PHOTO + PHOTO * (e + 1)];
-            let un = u / ALONG_UNIT_PX;
-            let contrast = ph[2] + ph[3] * un;
-            let r = s.value as f64 - (ph[0] + ph[1] * un + contrast * cdf);
-            let c = s.chunk as usize;
-            self.chunk_sq[c] += r * r;
-            self.chunk_n[c] += 1;
-            if !self.chunk_ok[c] {
-                continue;
-            }
-            let k = 1.5 * noise[e];
-            let weight = if r.abs() <= k { 1.0 } else { k / r.abs() };
-            sq[e] += weight * r * r;
-            wsum[e] += weight;
-            // d(model)/d(d) and d(model)/d(blur).
-            let dd = contrast * pdf / blur;
-            let db = -contrast * pdf * z / blur;
-            let turn_index = if shared { P_TURN } else { P_TURN + e };
-            let p0 = P_PHOTO + PHOTO * e;
-            let jac = [
-                (turn_index, -dd * u),
-                (P_OFFSET + e, -dd),
-                (P_BEND, -dd * w * w * w),
-                (P_BLUR, db),
-                (p0, 1.0),
-                (p0 + 1, un),
-                (p0 + 2, cdf),
-                (p0 + 3, cdf * un),
-            ];
-            ne.add(&jac, r, weight);
-        }
-        for e in 0..3 {
-            ne.noise[e] = if wsum[e] > 0.0 {
-                (sq[e] / wsum[e]).sqrt().max(0.5)
-            } else {
-                f64::INFINITY
-            };
-            if frames[e].is_none() {
-                ne.fixed[P_OFFSET + e] = true;
-                ne.fixed[P_TURN + e] = true;
-                for k in 0..PHOTO {
-                    ne.fixed[P_PHOTO + PHOTO * e + k] = true;
-                }
-            }
-        }
-        if shared {
-            ne.fixed[P_TURN + 1] = true;
-            ne.fixed[P_TURN + 2] = true;
-        }
-        if !frames.iter().flatten().any(|f| f.curved) {
-            ne.fixed[P_BEND] = true;
-        }
-        if std::env::var("NF_NOCSLOPE").is_ok() {
-            for e in 0..3 {
-                ne.fixed[P_PHOTO + PHOTO * e + 3] = true;
-            }
-        }
-        ne
-    }
-
     fn result(
         &self,
         frames: &[Option<EdgeFrame>; 3],
@@ -411,150 +411,15 @@ impl Refiner {
     }
 }
 
-/// Distance (along-units) from the corner into the band, zero before the corner.
-fn bend_coordinate(f: &EdgeFrame, n: [f64; 2], p: [f64; 2]) -> f64 {
-    let d = along(n);
-    let towards_far = dot(d, sub(f.origin, f.corner)).signum();
-    (towards_far * dot(d, sub(p, f.corner))).max(0.0) / f.reach
-}
-
-/// Accumulated normal equations `h * step = g` of one iteration.
-#[derive(Debug, Clone, Copy)]
-struct Normal {
-    h: [[f64; N_PARAMS]; N_PARAMS],
-    g: [f64; N_PARAMS],
-    fixed: [bool; N_PARAMS],
-    noise: [f64; 3],
-}
-
-impl Default for Normal {
-    fn default() -> Self {
-        Normal {
-            h: [[0.0; N_PARAMS]; N_PARAMS],
-            g: [0.0; N_PARAMS],
-            fixed: [false; N_PARAMS],
-            noise: [f64::INFINITY; 3],
-        }
-    }
-}
-
-impl Normal {
-    fn add(&mut self, jac: &[(usize, f64); 8], r: f64, w: f64) {
-        for &(i, ji) in jac {
-            self.g[i] += w * ji * r;
-            for &(k, jk) in jac {
-                self.h[i][k] += w * ji * jk;
-            }
-        }
-    }
-}
-
-/// Solves the damped normal equations with the fixed parameters held.
-// Index loops mirror the textbook formulas of the small dense solves below.
-#[allow(clippy::needless_range_loop)]
-fn solve(
-    h: &[[f64; N_PARAMS]; N_PARAMS],
-    g: &[f64; N_PARAMS],
-    fixed: &[bool; N_PARAMS],
-) -> Option<[f64; N_PARAMS]> {
-    let mut a = *h;
-    let mut b = *g;
-    for i in 0..N_PARAMS {
-        if fixed[i] || a[i][i] <= 0.0 {
-            for k in 0..N_PARAMS {
-                a[i][k] = 0.0;
-                a[k][i] = 0.0;
-            }
-            a[i][i] = 1.0;
-            b[i] = 0.0;
-        } else {
-            a[i][i] *= 1.0 + 1e-6;
-        }
-    }
-    cholesky_solve(&mut a, &mut b).then_some(b)
-}
-
-/// Variance factor of parameter `k` ((H^-1)_kk), free parameters only.
-fn variance(h: &[[f64; N_PARAMS]; N_PARAMS], fixed: &[bool; N_PARAMS], k: usize) -> Option<f64> {
-    let mut e = [0.0; N_PARAMS];
-    e[k] = 1.0;
-    let x = solve(h, &e, fixed)?;
-    Some(x[k].max(0.0))
-}
-
-/// In-place Cholesky solve of a symmetric positive definite system; false if not SPD.
-#[allow(clippy::needless_range_loop)]
-fn cholesky_solve(a: &mut [[f64; N_PARAMS]; N_PARAMS], b: &mut [f64; N_PARAMS]) -> bool {
-    for j in 0..N_PARAMS {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        if d <= 1e-12 {
-            return false;
-        }
-        let d = d.sqrt();
-        a[j][j] = d;
-        for i in j + 1..N_PARAMS {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s / d;
-        }
-    }
-    for i in 0..N_PARAMS {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[i][k] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-    for i in (0..N_PARAMS).rev() {
-        let mut s = b[i];
-        for k in i + 1..N_PARAMS {
-            s -= a[k][i] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-    true
-}
-
-/// Applies a Gauss-Newton step with trust limits on the geometric parameters.
-fn apply(x: &mut [f64; N_PARAMS], step: &[f64; N_PARAMS]) {
-    for (k, (xk, &dk)) in x.iter_mut().zip(step).enumerate() {
-        let limited = match k {
-            P_TURN..=2 => dk.clamp(-0.02, 0.02),
-            P_OFFSET..=5 => dk.clamp(-1.5, 1.5),
-            P_BEND => dk.clamp(-2.0, 2.0),
-            P_BLUR => dk.clamp(-0.3, 0.3),
-            _ => dk,
-        };
-        *xk += limited;
-    }
-    x[P_BLUR] = x[P_BLUR].clamp(0.3, 4.0);
-}
-
-/// Standard normal density.
-pub fn normal_pdf(z: f64) -> f64 {
-    0.398_942_280_401_432_7 * (-0.5 * z * z).exp()
-}
-
-/// Standard normal CDF via erf (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
-pub fn normal_cdf(z: f64) -> f64 {
-    let x = z * std::f64::consts::FRAC_1_SQRT_2;
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let erf = 1.0 - poly * (-x * x).exp();
-    0.5 * (1.0 + erf.copysign(x))
+/// Half-width of the band of pixels fitted around an edge, for a blur (pixels).
+pub fn half_width(blur: f64) -> f64 {
+    2.0 * blur + 2.5
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gauss::normal_cdf;
     use image::Luma;
 
     /// A blurred bright half-plane `n . p > rho` with noise-free grey levels.
@@ -564,13 +429,6 @@ mod tests {
             let d = n[0] * x as f64 + n[1] * y as f64 - rho;
             Luma([(60.0 + 150.0 * normal_cdf(d / blur)).round() as u8])
         })
-    }
-
-    #[test]
-    fn cdf_matches_known_values() {
-        assert!((normal_cdf(0.0) - 0.5).abs() < 1e-7);
-        assert!((normal_cdf(1.0) - 0.841_344_746).abs() < 2e-7);
-        assert!((normal_cdf(-2.0) - 0.022_750_132).abs() < 2e-7);
     }
 
     #[test]
@@ -589,9 +447,13 @@ mod tests {
             end: line.foot([180.0, 70.0]),
             line,
             bend_from: None,
+            bend0: 0.0,
+            bend_sigma: f64::INFINITY,
         };
         let mut r = Refiner::default();
-        let fit = r.fit(&img, &[None, Some(band), None], false, 1.0).unwrap();
+        let fit = r
+            .fit(&img, &[None, Some(band), None], false, 1.0, false)
+            .unwrap();
         let e = fit.edges[1].unwrap();
         let got = e.line.normal[1].atan2(e.line.normal[0]);
         assert!(
@@ -606,67 +468,5 @@ mod tests {
         let p = e.line.foot([100.0, 60.0]);
         assert!(truth.depth(p).abs() < 0.02, "{}", truth.depth(p));
         assert!((e.contrast - 150.0).abs() < 2.0 && (fit.blur - 1.2).abs() < 0.1);
-    }
-}
-
-#[cfg(test)]
-mod debug_refine {
-    use super::*;
-    use std::path::Path;
-
-    #[test]
-    #[ignore]
-    fn single_band_on_sample() {
-        let f = std::env::var("FRAME").unwrap();
-        let img = image::open(
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/data/samples")
-                .join(f),
-        )
-        .unwrap()
-        .to_luma8();
-        let v: Vec<f64> = std::env::var("BAND")
-            .unwrap()
-            .split(',')
-            .map(|s| s.parse().unwrap())
-            .collect();
-        let (p0, p1) = ([v[0], v[1]], [v[2], v[3]]);
-        let d = [(p1[0] - p0[0]), (p1[1] - p0[1])];
-        let len = d[0].hypot(d[1]);
-        let mut n = [-d[1] / len, d[0] / len];
-        // Orient the normal to the bright side.
-        let probe = |p: [f64; 2]| img.get_pixel(p[0] as u32, p[1] as u32)[0] as f64;
-        let mid = [0.5 * (p0[0] + p1[0]), 0.5 * (p0[1] + p1[1])];
-        if probe([mid[0] + 4.0 * n[0], mid[1] + 4.0 * n[1]])
-            < probe([mid[0] - 4.0 * n[0], mid[1] - 4.0 * n[1]])
-        {
-            n = [-n[0], -n[1]];
-        }
-        let line = Line::through(p0, n);
-        let band = Band {
-            start: p0,
-            end: p1,
-            line,
-            bend_from: None,
-        };
-        let mut r = Refiner::default();
-        let fit = r.fit(&img, &[None, Some(band), None], false, 1.2).unwrap();
-        let e = fit.edges[1].unwrap();
-        let dd = along(e.line.normal);
-        let mut a = -(dd[1].atan2(dd[0])).to_degrees();
-        while a > 90.0 {
-            a -= 180.0;
-        }
-        while a <= -90.0 {
-            a += 180.0;
-        }
-        println!(
-            "orientation {a:.4} blur {:.2} contrast {:.1} noise {:.1} samples {} rejected {}",
-            fit.blur,
-            e.contrast,
-            e.noise,
-            e.samples,
-            r.chunk_ok.iter().filter(|ok| !**ok).count()
-        );
     }
 }

@@ -1,0 +1,128 @@
+//! Tracking alone (decoded 8-bit frame in, estimate out), single thread.
+//!
+//! - `track/<size>/<frame>`: rendered frames of the typical probe at both frame sizes
+//!   (a busy low-magnification frame, a mid one, a high-magnification one, a blank one)
+//!   and a public sample frame;
+//! - `window/<deg>`: the same 640x480 frame for a Hough window of 10, 20 and 40 deg;
+//! - `clutter/<scratches>`: the same frame with more and more clutter.
+//!
+//! `cargo bench --bench tracker`; docs/tracker.md records the numbers.
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use image::GrayImage;
+use nanoforce::config::{CalibrationConfig, Config, TrackerConfig};
+use nanoforce::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
+use nanoforce::vision::{Calibration, Tracker};
+
+/// A session of the typical probe at `width`, calibrated, with the given frames.
+fn tracker_for(width: u32, window_deg: f64) -> (Setup, Tracker) {
+    let setup = Setup {
+        probe: ProbeGeometry::typical(),
+        width,
+        height: width * 3 / 4,
+        entry: Entry::Left,
+        base_deg: -18.0,
+    };
+    let session = Session::mixed_for(&setup, 11, 1);
+    let clicks = session.clicks();
+    let cfg = TrackerConfig {
+        threshold: session.threshold,
+        window_deg,
+        calibration: Some(CalibrationConfig {
+            reference_image: "reference.png".into(),
+            red: clicks.red,
+            blue: clicks.blue,
+            green: clicks.green,
+        }),
+    };
+    let (reference, _) = scene::render(&session.reference);
+    let cal =
+        Calibration::from_reference(&reference, cfg.calibration.as_ref().expect("clicks"), &cfg)
+            .expect("the rendered reference calibrates");
+    let mut tracker = Tracker::new(&cfg, cal, Some(setup.probe.cantilever()));
+    tracker.set_coherence(false);
+    (setup, tracker)
+}
+
+fn frame(setup: &Setup, style: Style, mag: f64, angle: f64, blank: bool) -> GrayImage {
+    let mut spec: FrameSpec = setup.frame(style, angle, mag, 77);
+    spec.apex_px = [0.5 * setup.width as f64, 0.55 * setup.height as f64];
+    spec.blank = blank;
+    scene::render(&spec).0
+}
+
+fn bench_sizes(c: &mut Criterion) {
+    let mut group = c.benchmark_group("track");
+    for width in [640u32, 1280] {
+        let (setup, mut tracker) = tracker_for(width, 20.0);
+        let size = format!("{}x{}", width, width * 3 / 4);
+        for (name, style, mag, blank) in [
+            ("clutter-1000x", Style::Clutter, 1000.0, false),
+            ("noisy-2000x", Style::Noisy, 2000.0, false),
+            ("harsh-3500x", Style::Harsh, 3500.0, false),
+            ("clean-8000x", Style::Clean, 8000.0, false),
+            ("blank", Style::Clutter, 2000.0, true),
+        ] {
+            let img = frame(&setup, style, mag, 12.0, blank);
+            assert_eq!(tracker.track(&img).detected, !blank, "{size} {name}");
+            group.bench_with_input(BenchmarkId::new(&size, name), &img, |b, img| {
+                b.iter(|| tracker.track(img))
+            });
+        }
+    }
+    // A public sample frame as recorded.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/samples/mixed");
+    let config = Config::load(&dir.join("probe.toml")).expect("sample config");
+    let clicks = config.tracker.calibration.clone().expect("calibration");
+    let reference = image::open(&clicks.reference_image)
+        .expect("reference")
+        .to_luma8();
+    let cal =
+        Calibration::from_reference(&reference, &clicks, &config.tracker).expect("calibrates");
+    let mut tracker = Tracker::new(&config.tracker, cal, Some(config.cantilever));
+    tracker.set_coherence(false);
+    let img = image::open(dir.join("frames/frame_00001.png"))
+        .expect("frame")
+        .to_luma8();
+    assert!(tracker.track(&img).detected);
+    group.bench_with_input(
+        BenchmarkId::new("640x480", "sample-mixed-1"),
+        &img,
+        |b, img| b.iter(|| tracker.track(img)),
+    );
+    group.finish();
+}
+
+fn bench_window(c: &mut Criterion) {
+    let mut group = c.benchmark_group("window");
+    for window in [10.0, 20.0, 40.0] {
+        let (setup, mut tracker) = tracker_for(640, window);
+        let img = frame(&setup, Style::Noisy, 2000.0, 8.0, false);
+        assert!(tracker.track(&img).detected);
+        group.bench_with_input(BenchmarkId::from_parameter(window), &img, |b, img| {
+            b.iter(|| tracker.track(img))
+        });
+    }
+    group.finish();
+}
+
+fn bench_clutter(c: &mut Criterion) {
+    let mut group = c.benchmark_group("clutter");
+    let (setup, mut tracker) = tracker_for(640, 20.0);
+    for scratches in [0u32, 5, 20] {
+        let mut spec = setup.frame(Style::Clutter, 8.0, 2000.0, 78);
+        spec.apex_px = [320.0, 264.0];
+        spec.look.scratches = scratches;
+        spec.look.particles = 4 * scratches;
+        let img = scene::render(&spec).0;
+        assert!(tracker.track(&img).detected);
+        group.bench_with_input(BenchmarkId::from_parameter(scratches), &img, |b, img| {
+            b.iter(|| tracker.track(img))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_sizes, bench_window, bench_clutter);
+criterion_main!(benches);

@@ -1,0 +1,253 @@
+//! The inner loop of the fit: every sample's residual, robust weight and Jacobian,
+//! accumulated into the normal equations (about 44 products per sample and iteration,
+//! which is where the tracker spends a third of its time).
+
+use super::gauss::cdf_pdf;
+use super::solve::Normal;
+use super::{
+    EdgeFrame, Refiner, Sample, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS, PHOTO,
+    P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN,
+};
+use crate::vision::geometry::{along, dot, rotate, sub};
+
+impl Refiner {
+    pub(super) fn normal_equations(
+        &mut self,
+        frames: &[Option<EdgeFrame>; 3],
+        x: &[f64; N_PARAMS],
+        noise: &[f64; 3],
+        shared: bool,
+        step: usize,
+    ) -> Normal {
+        let mut ne = Normal::default();
+        self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
+        self.chunk_n = [0; 3 * CHUNKS_PER_EDGE];
+        let mut sq = [0.0f64; 3];
+        let mut wsum = [0.0f64; 3];
+        let blur = x[P_BLUR];
+        let normals: [[f64; 2]; 3] = std::array::from_fn(|e| {
+            let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
+            frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
+        });
+        for (e, f) in frames.iter().enumerate() {
+            let Some(f) = f else { continue };
+            let turn_index = if shared { P_TURN } else { P_TURN + e };
+            let p0 = P_PHOTO + PHOTO * e;
+            let slots = [
+                turn_index,
+                P_OFFSET + e,
+                P_BEND,
+                P_BLUR,
+                p0,
+                p0 + 1,
+                p0 + 2,
+                p0 + 3,
+            ];
+            let params = EdgeParams {
+                normal: normals[e],
+                along: along(normals[e]),
+                offset: x[P_OFFSET + e],
+                bend: x[P_BEND],
+                blur,
+                photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
+                huber: 1.5 * noise[e],
+            };
+            let range = self.ranges[e].clone();
+            let acc = accumulate_edge(
+                &self.samples[range],
+                step,
+                f,
+                &params,
+                &self.chunk_ok,
+                &mut self.chunk_sq,
+                &mut self.chunk_n,
+            );
+            sq[e] = acc.sq;
+            wsum[e] = acc.wsum;
+            let mut k = 0;
+            for i in 0..8 {
+                ne.g[slots[i]] += acc.g[i];
+                for j in i..8 {
+                    ne.h[slots[i]][slots[j]] += acc.h[k];
+                    if i != j {
+                        ne.h[slots[j]][slots[i]] += acc.h[k];
+                    }
+                    k += 1;
+                }
+            }
+        }
+        for e in 0..3 {
+            ne.noise[e] = if wsum[e] > 0.0 {
+                (sq[e] / wsum[e]).sqrt().max(0.5)
+            } else {
+                f64::INFINITY
+            };
+            if frames[e].is_none() {
+                ne.fixed[P_OFFSET + e] = true;
+                // An absent edge's own rotation is held; the shared one (slot 0 in
+                // tracking mode) belongs to every edge.
+                if !shared {
+                    ne.fixed[P_TURN + e] = true;
+                }
+                for k in 0..PHOTO {
+                    ne.fixed[P_PHOTO + PHOTO * e + k] = true;
+                }
+            }
+        }
+        if shared {
+            ne.fixed[P_TURN + 1] = true;
+            ne.fixed[P_TURN + 2] = true;
+        }
+        if !frames.iter().flatten().any(|f| f.curved) {
+            ne.fixed[P_BEND] = true;
+        }
+        ne
+    }
+}
+
+/// The current parameters of one edge, as the inner loop needs them.
+struct EdgeParams {
+    normal: [f64; 2],
+    along: [f64; 2],
+    offset: f64,
+    bend: f64,
+    blur: f64,
+    /// level, level slope, contrast, contrast slope
+    photo: [f64; 4],
+    /// Huber threshold on the residual, grey levels.
+    huber: f64,
+}
+
+/// One edge's contribution to the normal equations, in the local parameter order
+/// (turn, offset, bend, blur, level, level slope, contrast, contrast slope); `h` is
+/// the upper triangle row by row.
+struct EdgeSums {
+    h: [f64; 36],
+    g: [f64; 8],
+    sq: f64,
+    wsum: f64,
+}
+
+/// The inner loop of the fit: residual, robust weight and Jacobian of every sample of
+/// one edge, accumulated. Stretch statistics are gathered for every sample; samples of
+/// rejected stretches contribute nothing else. Samples go four at a time through
+/// lane arrays, which the compiler turns into vector arithmetic for the 44 products per
+/// sample of the normal equations.
+// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+#[allow(clippy::needless_range_loop)]
+fn accumulate_edge(
+    samples: &[Sample],
+    step: usize,
+    f: &EdgeFrame,
+    p: &EdgeParams,
+    chunk_ok: &[bool],
+    chunk_sq: &mut [f64],
+    chunk_n: &mut [u32],
+) -> EdgeSums {
+    // The normal matrix is accumulated in f32 lanes (its rounding only slows the
+    // convergence a little), flushed into f64 every BLOCK samples; the gradient, which
+    // decides where the fit stops, stays in f64.
+    const LANES: usize = 4;
+    const BLOCK: usize = 64;
+    let mut h_total = [0.0f64; 36];
+    let mut h = [[0.0f32; LANES]; 36];
+    let mut g = [[0.0f64; LANES]; 8];
+    let (mut sq, mut wsum) = (0.0, 0.0);
+    let inv_blur = 1.0 / p.blur;
+    let corner_t = dot(p.along, sub(f.corner, f.origin));
+    let mut j = [[0.0f64; LANES]; 8];
+    let mut wt = [0.0f64; LANES];
+    let mut res = [0.0f64; LANES];
+    let mut lane = 0;
+    let mut pending = 0;
+    let flush = |j: &[[f64; LANES]; 8],
+                 wt: &[f64; LANES],
+                 res: &[f64; LANES],
+                 h: &mut [[f32; LANES]; 36],
+                 g: &mut [[f64; LANES]; 8]| {
+        let mut jf = [[0.0f32; LANES]; 8];
+        let mut wf = [[0.0f32; LANES]; 8];
+        for a in 0..8 {
+            for l in 0..LANES {
+                let wa = wt[l] * j[a][l];
+                g[a][l] += wa * res[l];
+                jf[a][l] = j[a][l] as f32;
+                wf[a][l] = wa as f32;
+            }
+        }
+        let mut k = 0;
+        for a in 0..8 {
+            for b in a..8 {
+                for l in 0..LANES {
+                    h[k][l] += wf[a][l] * jf[b][l];
+                }
+                k += 1;
+            }
+        }
+    };
+    let drain = |h: &mut [[f32; LANES]; 36], total: &mut [f64; 36]| {
+        for (t, v) in total.iter_mut().zip(h.iter_mut()) {
+            *t += v.iter().map(|&x| x as f64).sum::<f64>();
+            *v = [0.0; LANES];
+        }
+    };
+    for s in samples.iter().step_by(step) {
+        let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
+        let u = p.along[0] * rel[0] + p.along[1] * rel[1];
+        let w = if f.curved {
+            (f.towards * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
+        } else {
+            0.0
+        };
+        let w3 = w * w * w;
+        let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3;
+        let z = d * inv_blur;
+        let (cdf, pdf) = cdf_pdf(z);
+        let un = u * (1.0 / ALONG_UNIT_PX);
+        let contrast = p.photo[2] + p.photo[3] * un;
+        let r = s.value as f64 - (p.photo[0] + p.photo[1] * un + contrast * cdf);
+        let c = s.chunk as usize;
+        chunk_sq[c] += r * r;
+        chunk_n[c] += 1;
+        if !chunk_ok[c] {
+            continue;
+        }
+        let weight = if r.abs() <= p.huber {
+            1.0
+        } else {
+            p.huber / r.abs()
+        };
+        sq += weight * r * r;
+        wsum += weight;
+        let dd = contrast * pdf * inv_blur;
+        let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
+        for (ja, v) in j.iter_mut().zip(jac) {
+            ja[lane] = v;
+        }
+        wt[lane] = weight;
+        res[lane] = r;
+        lane += 1;
+        if lane == LANES {
+            flush(&j, &wt, &res, &mut h, &mut g);
+            lane = 0;
+            pending += LANES;
+            if pending >= BLOCK {
+                drain(&mut h, &mut h_total);
+                pending = 0;
+            }
+        }
+    }
+    if lane > 0 {
+        for l in lane..LANES {
+            wt[l] = 0.0;
+        }
+        flush(&j, &wt, &res, &mut h, &mut g);
+    }
+    drain(&mut h, &mut h_total);
+    EdgeSums {
+        h: h_total,
+        g: g.map(|v| v.iter().sum()),
+        sq,
+        wsum,
+    }
+}

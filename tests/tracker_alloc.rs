@@ -1,0 +1,84 @@
+//! Tracking allocates nothing per frame after warm-up: a counting global allocator in
+//! this test binary of its own watches frames of both sizes, busy and blank, with and
+//! without coherence.
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use image::GrayImage;
+use nanoforce::scene::{self, render_into};
+use nanoforce::vision::Tracker;
+
+mod tracker_support;
+
+struct Counting;
+
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: same contract as ours.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn tracking_allocates_nothing_after_warm_up() {
+    // One 640x480 and one 1280x960 session of the suite, frames rendered up front.
+    let sessions = scene::suite(41, 3, 24);
+    for session in [&sessions[0], &sessions[2]] {
+        let (cfg, cal) = tracker_support::rendered::calibrate(session);
+        let mut frames = Vec::new();
+        for (k, spec) in session.frames.iter().enumerate() {
+            let mut spec = *spec;
+            spec.blank |= k % 7 == 3;
+            let mut frame = GrayImage::new(1, 1);
+            render_into(&spec, &mut frame);
+            frames.push(frame);
+        }
+        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+        // Warm-up: one frame sizes every buffer for this frame size.
+        tracker.track(&frames[0]);
+        let mut detected = 0;
+        for coherence in [true, false] {
+            tracker.set_coherence(coherence);
+            ALLOCATIONS.store(0, Ordering::SeqCst);
+            COUNTING.store(true, Ordering::SeqCst);
+            for frame in &frames {
+                detected += tracker.track(frame).detected as usize;
+            }
+            COUNTING.store(false, Ordering::SeqCst);
+            let n = ALLOCATIONS.load(Ordering::SeqCst);
+            assert_eq!(
+                n,
+                0,
+                "{n} allocations over {} frames of {}x{}",
+                frames.len(),
+                frames[0].width(),
+                frames[0].height()
+            );
+        }
+        assert!(
+            detected > frames.len(),
+            "frames were really tracked: {detected}"
+        );
+    }
+}

@@ -1,0 +1,301 @@
+//! The tracker on frames rendered with exact truth (`nanoforce::scene`): the 600-frame
+//! suite spanning every condition of scene.md, blank frames, the paper's grid, sequences
+//! with magnification jumps, random order, and calibration against the true edges.
+//!
+//! Thresholds sit just above the values measured on these seeds (docs/tracker.md), so
+//! a regression fails. Run with `cargo test --release --test tracker_rendered`.
+mod tracker_support;
+
+use nanoforce::scene::{self, render, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
+use nanoforce::vision::{Edge, Tracker};
+use tracker_support::{rendered, score, table, Truth};
+
+/// Subset of frames by style.
+fn of_style(
+    t: &[Truth],
+    e: &[nanoforce::vision::Estimate],
+    style: &str,
+) -> (Vec<Truth>, Vec<nanoforce::vision::Estimate>) {
+    let idx: Vec<usize> = (0..t.len()).filter(|&i| t[i].style == style).collect();
+    (
+        idx.iter().map(|&i| t[i].clone()).collect(),
+        idx.iter().map(|&i| e[i]).collect(),
+    )
+}
+
+#[test]
+fn suite_of_600_rendered_frames() {
+    // 12 sessions x 50 frames: 1000x-8000x, both entry sides, bases within +-35 deg,
+    // +-20 deg, the four styles in equal shares, blank frames, 640x480 and 1280x960.
+    // Other seeds: SUITE_SEED=n (the thresholds were set on 31; 2024, 7, 99 and 33 pass).
+    let seed = std::env::var("SUITE_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(31);
+    let sessions = scene::suite(seed, 12, 50);
+    let (mut t, mut e) = (Vec::new(), Vec::new());
+    for s in &sessions {
+        let (ti, ei) = rendered::run(s, false);
+        t.extend(ti);
+        e.extend(ei);
+    }
+    let sc = score(&t, &e);
+    let why = format!("{sc:?}\n{}", table(&t, &e));
+    println!("all: {sc:?}");
+    let mut worst: Vec<usize> = (0..t.len())
+        .filter(|&i| t[i].detected && e[i].detected)
+        .collect();
+    let err = |i: usize| (e[i].angle_deg.unwrap_or(f64::NAN) - t[i].angle_deg).abs();
+    worst.sort_by(|&a, &b| err(b).total_cmp(&err(a)));
+    for &i in worst.iter().take(5) {
+        println!(
+            "worst: #{i} {} {}x err {:.3} sigma {:.3} conf {:.2}",
+            t[i].style,
+            t[i].magnification,
+            err(i),
+            e[i].angle_sigma_deg.unwrap_or(0.0),
+            e[i].confidence
+        );
+    }
+    assert_eq!(t.len(), 600);
+    assert!(sc.positives >= 550, "{why}");
+    assert!(sc.detect_rate >= 0.998, "{why}");
+    assert_eq!(sc.false_detections, 0, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.013, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.095, "{why}");
+    assert!(sc.angle_err_max_deg <= 0.26, "{why}");
+    assert!(sc.tip_err_median_px <= 0.11, "{why}");
+    for (style, median, p95) in [
+        ("clean", 0.006, 0.03),
+        ("clutter", 0.01, 0.05),
+        ("noisy", 0.017, 0.09),
+        ("harsh", 0.045, 0.17),
+    ] {
+        let (ts, es) = of_style(&t, &e, style);
+        let sc = score(&ts, &es);
+        println!("{style}: {sc:?}");
+        assert!(
+            sc.angle_err_median_deg <= median && sc.angle_err_p95_deg <= p95,
+            "{style}: {sc:?}"
+        );
+    }
+    for (lo, hi) in [
+        (1000.0, 1500.0),
+        (1500.0, 2500.0),
+        (2500.0, 4000.0),
+        (4000.0, 8001.0),
+    ] {
+        let idx: Vec<usize> = (0..t.len())
+            .filter(|&i| (lo..hi).contains(&t[i].magnification))
+            .collect();
+        let ts: Vec<Truth> = idx.iter().map(|&i| t[i].clone()).collect();
+        let es: Vec<_> = idx.iter().map(|&i| e[i]).collect();
+        println!("{lo}x-{hi}x: {:?}", score(&ts, &es));
+    }
+}
+
+#[test]
+fn blank_frames_are_never_detected() {
+    // The suite's clutter, substrate, shading and noise, without the probe.
+    let mut sessions = scene::suite(32, 12, 50);
+    let mut max_confidence: f64 = 0.0;
+    for s in &mut sessions {
+        for f in &mut s.frames {
+            f.blank = true;
+        }
+        let (_, est) = rendered::run(s, true);
+        for e in &est {
+            assert!(
+                !e.detected && e.angle_deg.is_none() && e.force_nn.is_none(),
+                "{e:?}"
+            );
+            max_confidence = max_confidence.max(e.confidence);
+        }
+    }
+    assert!(max_confidence < 0.25, "closest call {max_confidence}");
+}
+
+/// A session of the typical probe (like the public samples) with given frames.
+fn typical_session(frames: Vec<FrameSpec>) -> Session {
+    let setup = Setup {
+        probe: ProbeGeometry::typical(),
+        width: 640,
+        height: 480,
+        entry: Entry::Left,
+        base_deg: -18.0,
+    };
+    let mut session = Session::mixed_for(&setup, 5, 1);
+    session.frames = frames;
+    session
+}
+
+#[test]
+fn the_papers_grid_passes_without_coherence() {
+    // The paper fails at 20 deg for 2000x and 1500x (its Figure 8 g, k); we must not.
+    let mut frames = Vec::new();
+    for mag in [3500.0, 2000.0, 1500.0] {
+        for angle in [0.0, 5.0, 20.0, -5.0, -20.0] {
+            for (k, style) in [Style::Clean, Style::Clutter, Style::Noisy]
+                .into_iter()
+                .enumerate()
+            {
+                let mut f = FrameSpec::new(style, angle, 100 + frames.len() as u64);
+                f.magnification = mag;
+                f.apex_px = [300.0 + 20.0 * k as f64, 250.0];
+                frames.push(f);
+            }
+        }
+    }
+    let session = typical_session(frames);
+    let (t, e) = rendered::run(&session, false);
+    let sc = score(&t, &e);
+    let why = format!("{sc:?}\n{}", table(&t, &e));
+    assert_eq!(sc.detect_rate, 1.0, "{why}");
+    assert!(sc.angle_err_max_deg <= 0.1, "{why}");
+    assert!(sc.tip_err_median_px <= 0.15, "{why}");
+}
+
+#[test]
+fn coherence_is_a_shortcut_never_a_dependency() {
+    // An operator pressing and releasing, with magnification jumps and the probe now and
+    // then out of view; then the same frames shuffled, coherence still on.
+    let session = Session::sequence(8, 240, 640, 480);
+    let (t, with) = rendered::run(&session, true);
+    let (_, without) = rendered::run(&session, false);
+    let mut shuffled = session.clone();
+    let mut order: Vec<usize> = (0..session.frames.len()).collect();
+    let mut rng = scene::rng::Rng::new(9);
+    for i in (1..order.len()).rev() {
+        order.swap(i, rng.int(0, i as u32) as usize);
+    }
+    shuffled.frames = order.iter().map(|&i| session.frames[i]).collect();
+    let (ts, random) = rendered::run(&shuffled, true);
+    assert!(
+        t.iter().any(|x| !x.detected),
+        "the sequence has blank frames"
+    );
+    assert!(
+        session
+            .frames
+            .windows(2)
+            .filter(|w| w[0].magnification != w[1].magnification)
+            .count()
+            >= 3
+    );
+    for (name, truth, est) in [
+        ("with", &t, &with),
+        ("without", &t, &without),
+        ("shuffled", &ts, &random),
+    ] {
+        let sc = score(truth, est);
+        let why = format!("{name}: {sc:?}");
+        assert_eq!(sc.detect_rate, 1.0, "{why}");
+        assert_eq!(sc.false_detections, 0, "{why}");
+        // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
+        assert!(
+            sc.angle_err_p95_deg <= 0.18 && sc.angle_err_max_deg <= 0.36,
+            "{why}"
+        );
+    }
+    // Coherence only shortcuts the search: the fit, hence the angle, is the same.
+    for (a, b) in with.iter().zip(&without) {
+        if let (Some(x), Some(y)) = (a.angle_deg, b.angle_deg) {
+            assert!((x - y).abs() < 1e-6, "{x} vs {y}");
+        }
+    }
+}
+
+#[test]
+fn calibration_finds_the_true_edges_and_the_reference_reads_zero() {
+    for (i, s) in scene::suite(33, 6, 1).iter().enumerate() {
+        let (cfg, cal) = rendered::calibrate(s);
+        let (reference, truth) = render(&s.reference);
+        let edges = truth.edges.expect("reference shows the probe");
+        let mut clicked_worst: f64 = 0.0;
+        for (edge, seg) in [
+            (Edge::Red, edges.red),
+            (Edge::Blue, edges.blue),
+            (Edge::Green, edges.green),
+        ] {
+            let c = cal.edge(edge);
+            let diff = |a: f64| {
+                let d = (a - seg.angle_deg()).rem_euclid(180.0);
+                d.min(180.0 - d)
+            };
+            // The rendered outline (blur, the bright rim, shading) deviates from the
+            // geometric edge by up to a few hundredths of a degree in a step fit.
+            assert!(
+                diff(c.orientation_deg) < 0.04,
+                "session {i} {edge}: {} vs {}",
+                c.orientation_deg,
+                seg.angle_deg()
+            );
+            clicked_worst = clicked_worst.max(diff(c.clicked_orientation_deg));
+        }
+        assert!(
+            clicked_worst > 0.1,
+            "session {i}: clicks alone are off by tenths"
+        );
+        let apex = cal.apex_px();
+        let apex_err = (apex[0] - truth.tip_x).hypot(apex[1] - truth.tip_y);
+        assert!(apex_err < 0.15, "session {i}: apex {apex_err} px off");
+        let mut tracker = Tracker::new(&cfg, cal, None);
+        let e = tracker.track(&reference);
+        let angle = e.angle_deg.expect("reference detected");
+        assert!(
+            angle.abs() < 0.005,
+            "session {i}: the reference reads {angle}"
+        );
+    }
+}
+
+/// CPU time of this thread, seconds (10 ms ticks; immune to other processes' load).
+fn thread_cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+    let after = stat.rfind(')').map_or("", |i| &stat[i + 2..]);
+    let f: Vec<&str> = after.split(' ').collect();
+    let tick = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) / 100.0
+}
+
+/// Tracking CPU time per frame on the bench's frames, measured as thread CPU time so
+/// that a busy machine does not inflate it (criterion's wall-clock medians do). A
+/// measuring tool for docs/tracker.md: `cargo test --release --test tracker_rendered
+/// cpu_time -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn cpu_time_per_frame() {
+    for width in [640u32, 1280] {
+        let setup = Setup {
+            probe: ProbeGeometry::typical(),
+            width,
+            height: width * 3 / 4,
+            entry: Entry::Left,
+            base_deg: -18.0,
+        };
+        let session = Session::mixed_for(&setup, 11, 1);
+        let (cfg, cal) = rendered::calibrate(&session);
+        let mut tracker = Tracker::new(&cfg, cal, Some(setup.probe.cantilever()));
+        tracker.set_coherence(false);
+        for (name, style, mag, blank) in [
+            ("clutter-1000x", Style::Clutter, 1000.0, false),
+            ("noisy-2000x", Style::Noisy, 2000.0, false),
+            ("harsh-3500x", Style::Harsh, 3500.0, false),
+            ("clean-8000x", Style::Clean, 8000.0, false),
+            ("blank", Style::Clutter, 2000.0, true),
+        ] {
+            let mut spec = setup.frame(style, 12.0, mag, 77);
+            spec.apex_px = [0.5 * width as f64, 0.55 * setup.height as f64];
+            spec.blank = blank;
+            let img = render(&spec).0;
+            assert_eq!(tracker.track(&img).detected, !blank);
+            let n = 400;
+            let t0 = thread_cpu_s();
+            for _ in 0..n {
+                std::hint::black_box(tracker.track(&img));
+            }
+            let ms = (thread_cpu_s() - t0) * 1e3 / n as f64;
+            println!("{width}x{} {name}: {ms:.2} ms CPU per frame", setup.height);
+        }
+    }
+}
