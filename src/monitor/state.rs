@@ -192,6 +192,7 @@ fn estimate_of(s: &FrameSnapshot) -> Estimate {
         force_nn: Some(e.force_nn).filter(|f| f.is_finite()),
         force_saturated: false,
         apex_px: apex,
+        angle_sigma_deg: None,
         edges: s.edges.map(|seg| {
             seg.map(|[a, b]| EdgeFit {
                 start_px: a,

@@ -89,6 +89,7 @@ fn estimate_of(row: &FrameRow) -> Estimate {
         force_saturated: false,
         apex_px: row.tip_px,
         edges: row.edges.map(fit),
+        angle_sigma_deg: None,
         scale: None,
         confidence: row.confidence.unwrap_or(0.0),
         miss: None,

@@ -304,6 +304,7 @@ mod tests {
             force_nn: Some(-700.25),
             force_saturated: false,
             apex_px: Some([320.5, 240.25]),
+            angle_sigma_deg: None,
             edges: [
                 Some(fit([300.0, 200.0], [100.0, 150.0])),
                 None,

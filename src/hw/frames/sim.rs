@@ -8,6 +8,9 @@ use crate::hw::Clock;
 use crate::scene::Renderer;
 use crate::sim::sem::SemScene;
 
+/// Slack between the end of a render and its frame's delivery, seconds.
+const RENDER_MARGIN_S: f64 = 0.001;
+
 pub struct SimSem {
     scene: SemScene,
     stage: Option<triple_buffer::Output<StageSnapshot>>,
@@ -16,6 +19,8 @@ pub struct SimSem {
     period_s: f64,
     next_capture_s: Option<f64>,
     sequence: u64,
+    /// The slowest recent render, seconds (decays slowly), to start the next one in time.
+    render_s: f64,
 }
 
 impl SimSem {
@@ -34,6 +39,7 @@ impl SimSem {
             period_s,
             next_capture_s: None,
             sequence: 0,
+            render_s: 0.005,
         }
     }
 }
@@ -54,6 +60,14 @@ impl FrameSource for SimSem {
             self.sequence += 1;
         }
         self.next_capture_s = Some(capture_s + self.period_s);
+        // A real SEM does not use the control PC's CPU. The stage state at `capture_s` is
+        // already known, so render late, just before delivery, in the part of the period
+        // where the tracker has finished the previous frame, instead of right after that
+        // frame's delivery, where the two would compete for the cores.
+        let deliver_s = capture_s + delay_s;
+        let start_s = deliver_s - (2.0 * self.render_s + RENDER_MARGIN_S);
+        crate::daemon::rt::sleep_until(self.clock.monotonic_ns_at(start_s), 0);
+        let render_started_s = self.clock.now_s();
         let stage_um = self
             .stage
             .as_mut()
@@ -61,7 +75,9 @@ impl FrameSource for SimSem {
             .unwrap_or_default();
         let (spec, truth) = self.scene.frame(capture_s, self.sequence, stage_um);
         self.renderer.render_into(&spec, frame);
-        let deliver_ns = self.clock.monotonic_ns_at(capture_s + delay_s);
+        let took_s = self.clock.now_s() - render_started_s;
+        self.render_s = took_s.max(self.render_s * 0.99);
+        let deliver_ns = self.clock.monotonic_ns_at(deliver_s);
         crate::daemon::rt::sleep_until(deliver_ns, 0);
         self.sequence += 1;
         Ok(FrameMeta {
