@@ -27,7 +27,8 @@ fn of_style(
 fn suite_of_600_rendered_frames() {
     // 12 sessions x 50 frames: 1000x-8000x, both entry sides, bases within +-35 deg,
     // +-20 deg, the four styles in equal shares, blank frames, 640x480 and 1280x960.
-    // Other seeds: SUITE_SEED=n (the thresholds were set on 31; 2024, 7, 99 and 33 pass).
+    // Other seeds: SUITE_SEED=n (the thresholds were set on 31; docs/tracker.md lists
+    // 2024, 7, 99 and 33, whose worst frames exceed some of them).
     let seed = std::env::var("SUITE_SEED")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -62,14 +63,18 @@ fn suite_of_600_rendered_frames() {
     assert!(sc.detect_rate >= 0.998, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
     assert!(sc.angle_err_median_deg <= 0.013, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.095, "{why}");
-    assert!(sc.angle_err_max_deg <= 0.26, "{why}");
-    assert!(sc.tip_err_median_px <= 0.11, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.092, "{why}");
+    // Was 0.26, set before the renderer matched the public samples (harsher clutter and
+    // jitter): main then measured 0.34. The worst frames are harsh ones whose error is
+    // 2-3 times the fit's own standard error (Estimate::angle_sigma_deg, 0.1-0.16 deg
+    // there): noise, not a failure (docs/tracker.md, Accuracy). Measured 0.327.
+    assert!(sc.angle_err_max_deg <= 0.34, "{why}");
+    assert!(sc.tip_err_median_px <= 0.085, "{why}");
     for (style, median, p95) in [
-        ("clean", 0.006, 0.03),
-        ("clutter", 0.01, 0.05),
-        ("noisy", 0.017, 0.09),
-        ("harsh", 0.045, 0.17),
+        ("clean", 0.005, 0.023),
+        ("clutter", 0.0105, 0.048),
+        ("noisy", 0.017, 0.07),
+        ("harsh", 0.041, 0.14),
     ] {
         let (ts, es) = of_style(&t, &e, style);
         let sc = score(&ts, &es);
@@ -192,8 +197,10 @@ fn coherence_is_a_shortcut_never_a_dependency() {
         assert_eq!(sc.detect_rate, 1.0, "{why}");
         assert_eq!(sc.false_detections, 0, "{why}");
         // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
+        // p95 was 0.18, set before the renderer matched the public samples; main then
+        // measured 0.214. Measured 0.213 and max 0.302.
         assert!(
-            sc.angle_err_p95_deg <= 0.18 && sc.angle_err_max_deg <= 0.36,
+            sc.angle_err_p95_deg <= 0.22 && sc.angle_err_max_deg <= 0.31,
             "{why}"
         );
     }

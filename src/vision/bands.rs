@@ -5,7 +5,7 @@
 //! tracking, so that both fit exactly the same stretches and the reference reads zero.
 
 use super::geometry::{add, along, clip_to_rect, dot, norm, scale, sub, Line};
-use super::refine::{half_width, Band, FitResult, BEND_UNIT_PX};
+use super::refine::{half_width, Band, FitResult, Partner, BEND_UNIT_PX};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use crate::model::{Cantilever, ModelTable};
 
@@ -24,6 +24,17 @@ pub struct BendPrior {
     pub mean: f64,
     pub sigma: f64,
 }
+
+/// Pixels within this many blurs of a neighbouring face's inside (see
+/// [`crate::vision::refine::Band`]'s partner) are left out of a pyramid face's band.
+const CORNER_BLURS: f64 = 3.0;
+/// With that mask, a face's band stops this share of the old corner trim (several
+/// blurs) short of its corners: the mask does the rest, and the ends of a face, which
+/// pin its rotation down, are fitted.
+const CORNER_TRIM: f64 = 0.3;
+/// The beam's lower face is placed through a face's far end as calibrated (to a pixel
+/// or two): its mask reaches this much further.
+const BASE_SLACK_PX: f64 = 2.0;
 
 /// Shortest band worth fitting, frame pixels.
 const MIN_BAND_PX: f64 = 10.0;
@@ -65,6 +76,40 @@ pub fn bend_prior(
         mean,
         sigma: 0.7 * mean.abs() + 0.03,
     }
+}
+
+/// The neighbouring faces of a pyramid face (none for the beam edge): its partner at
+/// the apex and, when its far end was seen in the reference, the beam's lower face
+/// there (see the fields of [`Band`]).
+fn corners(
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    far: [f64; 2],
+    blur: f64,
+) -> (Option<Partner>, Option<Partner>) {
+    let other = match e {
+        BLUE => GREEN,
+        GREEN => BLUE,
+        _ => return (None, None),
+    };
+    let partner = Partner {
+        line: t.line(pose, other),
+        margin_px: CORNER_BLURS * blur,
+    };
+    let base = (!t.edges[e].far_open).then(|| Partner {
+        line: lower_face(t, pose, far),
+        margin_px: CORNER_BLURS * blur + BASE_SLACK_PX,
+    });
+    (Some(partner), base)
+}
+
+/// The beam's lower face where a pyramid face ends at `far`: through that corner, along
+/// the beam (straight there: the bend starts behind the pyramid), inward normal
+/// pointing into the beam.
+fn lower_face(t: &Template, pose: &Pose, far: [f64; 2]) -> Line {
+    let n = t.line(pose, RED).normal;
+    Line::through(far, [-n[0], -n[1]])
 }
 
 /// The part of edge `e`'s predicted segment inside the frame: (corner side, far side).
@@ -121,9 +166,15 @@ pub fn bands(
         } else {
             full
         };
-        let trim_corner = if e == RED { reach } else { reach / sin_apex };
+        let trim_corner = if e == RED {
+            reach
+        } else {
+            CORNER_TRIM * reach / sin_apex
+        };
         let (a, b) = clip_to_rect(tip, dir, lo_rect, hi_rect)?;
-        let (a, b) = (a.max(trim_corner), b.min(len - 1.5 * reach));
+        let (partner, base) = corners(t, pose, e, far, blur);
+        let far_trim = if base.is_some() { CORNER_TRIM } else { 1.0 } * 1.5 * reach;
+        let (a, b) = (a.max(trim_corner), b.min(len - far_trim));
         if b - a < MIN_BAND_PX {
             return None;
         }
@@ -135,6 +186,8 @@ pub fn bands(
             bend_from: (e == RED).then(|| line.foot(t.place(pose, red.point(t.bend_tau)))),
             bend0: bend.mean,
             bend_sigma: bend.sigma,
+            partner,
+            base,
         })
     })
 }

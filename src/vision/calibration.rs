@@ -407,6 +407,8 @@ fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
         bend_from: None,
         bend0: 0.0,
         bend_sigma: f64::INFINITY,
+        partner: None,
+        base: None,
     }
 }
 

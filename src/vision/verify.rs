@@ -45,7 +45,7 @@ impl Evidence {
     /// The combined confidence in [0, 1].
     pub fn confidence(&self) -> f64 {
         let ramp = |x: f64, lo: f64, hi: f64| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
-        let coverage = ramp(self.coverage, 0.4, 0.75);
+        let coverage = ramp(self.coverage, 0.3, 0.65);
         let contrast = ramp(self.contrast_ratio, MIN_CONTRAST_RATIO, 0.45);
         let interior = ramp(self.interior, 0.4, 0.75);
         let precision = (-self.turn_sigma_deg / 0.3).exp();
@@ -168,7 +168,7 @@ mod tests {
         assert!(good.confidence() > 0.9);
         for bad in [
             Evidence {
-                coverage: 0.5,
+                coverage: 0.35,
                 ..good
             },
             Evidence {

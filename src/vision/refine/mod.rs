@@ -69,6 +69,40 @@ pub struct Band {
     pub bend0: f64,
     /// Standard deviation of the prior on the bend around `bend0` (infinite: no prior).
     pub bend_sigma: f64,
+    /// The face this one meets at a convex corner (the apex), with its margin: near it
+    /// the grey levels are the blurred wedge, not one blurred step, so a pixel is left
+    /// out when it lies within `margin` pixels of that face's inside and not clearly
+    /// outside this one. The band can then run up to the corner instead of stopping
+    /// several blurs short of it, where the ends that pin the rotation down are.
+    pub partner: Option<Partner>,
+    /// The face (the beam's lower face) this one meets at a concave corner, at its far
+    /// end: there the probe is the union of the two, so a pixel is left out when it
+    /// lies within `margin` of that face's inside and not clearly inside this one.
+    pub base: Option<Partner>,
+}
+
+/// A neighbouring face of a band's edge (see [`Band::partner`] and [`Band::base`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Partner {
+    /// Its line, inward normal.
+    pub line: Line,
+    /// How far (pixels) its blurred step reaches, plus its placement's uncertainty.
+    pub margin_px: f64,
+}
+
+impl Band {
+    /// Whether pixel `p` sees a neighbouring face as well as this edge, so that the
+    /// single blurred step does not describe it.
+    fn near_corner(&self, p: [f64; 2]) -> bool {
+        let own = self.line.depth(p);
+        let apex = self
+            .partner
+            .is_some_and(|q| q.line.depth(p) < q.margin_px && own > -q.margin_px);
+        let base = self
+            .base
+            .is_some_and(|q| q.line.depth(p) > -q.margin_px && own < q.margin_px);
+        apex || base
+    }
 }
 
 /// The outer part of a band (pixels) where only every other pixel is fitted.
@@ -305,6 +339,9 @@ impl Refiner {
                     continue;
                 }
                 let (px, py) = if horizontal { (a, c) } else { (c, a) };
+                if b.near_corner([px as f64, py as f64]) {
+                    continue;
+                }
                 let value = raw[py as usize * width + px as usize];
                 let local = (((a as f64 - lo) / chunk_lines) as usize).min(CHUNKS_PER_EDGE - 1);
                 self.samples.push(Sample {
@@ -449,6 +486,8 @@ mod tests {
             bend_from: None,
             bend0: 0.0,
             bend_sigma: f64::INFINITY,
+            partner: None,
+            base: None,
         };
         let mut r = Refiner::default();
         let fit = r
