@@ -39,7 +39,9 @@ fn the_demo_session_replays_against_its_truth() {
     assert!(s.angle_err_max_deg <= 0.12, "{why}");
     assert!(s.tip_err_median_px <= 0.15, "{why}");
     assert_eq!(
-        std::fs::read_dir(out.path().join("overlays")).unwrap().count(),
+        std::fs::read_dir(out.path().join("overlays"))
+            .unwrap()
+            .count(),
         24
     );
     let report = out.path().join("report");
