@@ -8,8 +8,25 @@ fn main() -> ExitCode {
     match nanoforce::cli::run(cli) {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("nanoforce: error: {err:#}");
+            eprintln!("nanoforce: error: {}", message(&err));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes, "a: b: c"; a cause whose text its parent already ends
+/// with (our errors name their source in their own message) is not repeated.
+fn message(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.ends_with(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
 }

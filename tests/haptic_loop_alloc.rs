@@ -130,6 +130,7 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
         loop_options: LoopOptions {
             rt_priority: None,
             lock_memory: false,
+            cpu_latency_us: None,
             telemetry_every: 1,
             ..LoopOptions::default()
         },

@@ -13,6 +13,7 @@ pub(crate) struct RawDaemon {
     rt_priority: Option<i64>,
     lock_memory: Option<bool>,
     spin_us: Option<i64>,
+    cpu_latency_us: Option<i64>,
     telemetry_every: Option<i64>,
     state_dir: Option<String>,
 }
@@ -45,6 +46,18 @@ impl DaemonConfig {
             Some(s @ 0..=500) => s as u64,
             Some(s) => return Err(check.invalid("daemon.spin_us", s, "must be in [0, 500] us")),
         };
+        let cpu_latency_us = match raw.cpu_latency_us {
+            None => d.cpu_latency_us,
+            Some(-1) => None,
+            Some(us @ 0..=10_000) => Some(us as u32),
+            Some(us) => {
+                return Err(check.invalid(
+                    "daemon.cpu_latency_us",
+                    us,
+                    "must be in [0, 10000] us, or -1 to leave the system's setting",
+                ))
+            }
+        };
         let telemetry_every = match raw.telemetry_every {
             None => d.telemetry_every,
             Some(n @ 1..=10_000) => n as u32,
@@ -67,9 +80,59 @@ impl DaemonConfig {
                 rt_priority,
                 lock_memory: raw.lock_memory.unwrap_or(d.lock_memory),
                 spin_us,
+                cpu_latency_us,
                 telemetry_every,
             },
             state_dir,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use crate::cli::run::SIM_CONFIG;
+    use crate::config::Config;
+
+    /// The built-in simulated lab with `[daemon]` replaced by `daemon`.
+    fn load(daemon: &str) -> Result<Config, String> {
+        let base = SIM_CONFIG.split("\n[daemon]").next().unwrap_or_default();
+        let rest = SIM_CONFIG.split("\n[monitor]").nth(1).unwrap_or_default();
+        let text = format!("{base}\n[daemon]\n{daemon}\n\n[monitor]{rest}");
+        Config::from_toml_str(&text, Path::new("lab.toml")).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn real_time_settings_and_their_defaults() {
+        let options = load("").unwrap().daemon.loop_options;
+        assert_eq!(options.rt_priority, Some(80));
+        assert_eq!(options.cpu_latency_us, Some(0));
+        let options = load("rt_priority = 0\ncpu_latency_us = -1\nspin_us = 0")
+            .unwrap()
+            .daemon
+            .loop_options;
+        assert_eq!(options.rt_priority, None);
+        assert_eq!(options.cpu_latency_us, None);
+        assert_eq!(options.spin_us, 0);
+        let options = load("cpu_latency_us = 20").unwrap().daemon.loop_options;
+        assert_eq!(options.cpu_latency_us, Some(20));
+    }
+
+    #[test]
+    fn out_of_range_values_name_file_key_and_value() {
+        for (line, key, value) in [
+            ("rt_priority = 100", "daemon.rt_priority", "100"),
+            ("cpu_latency_us = -2", "daemon.cpu_latency_us", "-2"),
+            ("spin_us = 501", "daemon.spin_us", "501"),
+            ("telemetry_every = 0", "daemon.telemetry_every", "0"),
+        ] {
+            let err = load(line).unwrap_err();
+            assert!(
+                err.contains("lab.toml") && err.contains(key) && err.contains(value),
+                "{err}"
+            );
+        }
+        assert!(load("spin = 3").unwrap_err().contains("spin"));
     }
 }

@@ -7,6 +7,7 @@
 //! buffer, new gains and telemetry through wait-free rings, statistics go into
 //! preallocated histograms. Outputs are zeroed and forces switched off when the loop
 //! ends for any reason, panics included ([`Outputs`]'s `Drop`).
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -29,6 +30,9 @@ pub struct LoopOptions {
     pub lock_memory: bool,
     /// Busy-wait this long before each deadline for a precise wake-up.
     pub spin_us: u64,
+    /// PM QoS limit on CPU wake-up latency held while the loop runs (None: leave the
+    /// system's setting).
+    pub cpu_latency_us: Option<u32>,
     /// Record every n-th tick in the telemetry.
     pub telemetry_every: u32,
 }
@@ -39,6 +43,7 @@ impl Default for LoopOptions {
             rt_priority: Some(80),
             lock_memory: true,
             spin_us: 60,
+            cpu_latency_us: Some(0),
             telemetry_every: 10,
         }
     }
@@ -172,7 +177,8 @@ impl HapticLoop {
             .spawn(move || self.run())
     }
 
-    fn prepare_thread(&self) -> bool {
+    /// Real-time settings for this thread; the latency request lives as long as the loop.
+    fn prepare_thread(&self) -> (bool, Option<rt::CpuLatencyRequest>) {
         let mut realtime = false;
         if let Some(priority) = self.options.rt_priority {
             match rt::set_realtime_priority(priority) {
@@ -190,12 +196,24 @@ impl HapticLoop {
                 );
             }
         }
-        realtime
+        let latency = self.options.cpu_latency_us.and_then(|us| {
+            let device = Path::new(rt::CPU_LATENCY_DEVICE);
+            rt::request_cpu_latency(device, us)
+                .map_err(|e| {
+                    tracing::warn!(
+                        "haptic loop: CPU wake-up latency limit of {us} us refused ({}: {e}); \
+                         idle CPUs may wake late (udev/99-nanoforce.rules grants access)",
+                        device.display()
+                    )
+                })
+                .ok()
+        });
+        (realtime, latency)
     }
 
     /// Runs until `shared.stop` is set; returns the loop's numbers.
     pub fn run(mut self) -> LoopReport {
-        let realtime = self.prepare_thread();
+        let (realtime, _latency_request) = self.prepare_thread();
         let mut periods_us = Histogram::new(1.0, 20_000.0);
         let mut period_ns = self.period_ns();
         let spin_ns = self.options.spin_us * 1000;

@@ -1,7 +1,10 @@
-//! Real-time helpers for the haptic loop thread: SCHED_FIFO priority, locked memory and
-//! sleeping until an absolute CLOCK_MONOTONIC deadline. Each may be refused (no
-//! CAP_SYS_NICE / RLIMIT_RTPRIO, RLIMIT_MEMLOCK): the caller logs a warning and goes on.
-use std::io;
+//! Real-time helpers for the haptic loop thread: SCHED_FIFO priority, locked memory, a
+//! limit on CPU wake-up latency, and sleeping until an absolute CLOCK_MONOTONIC deadline.
+//! Each may be refused (no CAP_SYS_NICE / RLIMIT_RTPRIO, RLIMIT_MEMLOCK, no access to
+//! /dev/cpu_dma_latency): the caller logs a warning and goes on.
+use std::fs::File;
+use std::io::{self, Write};
+use std::path::Path;
 
 use crate::hw::clock::monotonic_ns;
 
@@ -28,6 +31,26 @@ pub fn lock_memory() -> io::Result<()> {
     } else {
         Err(io::Error::last_os_error())
     }
+}
+
+/// The kernel's PM QoS interface for CPU wake-up latency.
+pub const CPU_LATENCY_DEVICE: &str = "/dev/cpu_dma_latency";
+
+/// A held PM QoS request: while it lives, idle CPUs stay in states they can leave within
+/// the requested time (0: they poll instead of sleeping; under a hypervisor, they are not
+/// handed back to the host). Dropping it closes the file, which withdraws the request.
+#[derive(Debug)]
+pub struct CpuLatencyRequest {
+    _file: File,
+}
+
+/// Asks the kernel (through `device`, normally [`CPU_LATENCY_DEVICE`]) to keep CPU
+/// wake-up latency at most `max_us` microseconds for as long as the result is held.
+pub fn request_cpu_latency(device: &Path, max_us: u32) -> io::Result<CpuLatencyRequest> {
+    let mut file = File::options().write(true).open(device)?;
+    let value = i32::try_from(max_us).map_err(|_| io::Error::from(io::ErrorKind::InvalidInput))?;
+    file.write_all(&value.to_ne_bytes())?;
+    Ok(CpuLatencyRequest { _file: file })
 }
 
 /// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns`, then spins the last
@@ -75,5 +98,17 @@ mod tests {
         }
         let past = monotonic_ns() - 1_000_000;
         sleep_until(past, 0);
+    }
+
+    #[test]
+    fn a_latency_request_writes_the_kernel_s_binary_value_and_holds_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let device = dir.path().join("cpu_dma_latency");
+        std::fs::write(&device, b"").unwrap();
+        let request = request_cpu_latency(&device, 20).unwrap();
+        assert_eq!(std::fs::read(&device).unwrap(), 20i32.to_ne_bytes());
+        drop(request);
+        let missing = request_cpu_latency(&dir.path().join("absent"), 0).unwrap_err();
+        assert_eq!(missing.kind(), io::ErrorKind::NotFound);
     }
 }
