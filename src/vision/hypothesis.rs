@@ -13,7 +13,7 @@
 
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
-use super::geometry::{clip_to_rect, dot, norm, rotate, sub, wrap_pi};
+use super::geometry::{add, clip_to_rect, dot, norm, rotate, scale, sub, wrap_pi};
 use super::template::{Pose, Template, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
@@ -175,8 +175,10 @@ impl Search {
             }
         }
         let mut members = [None; 3];
+        let mut turned = [([0.0; 2], [0.0; 2]); 3];
         for &i in idx {
             members[list[i].edge] = Some(i);
+            turned[list[i].edge] = turned_segment(t, psi, list[i].edge);
         }
         let partial = |pose: &Pose| -> Option<([Coverage; 3], f64)> {
             if !plausible(t, pose, size) {
@@ -185,7 +187,7 @@ impl Search {
             let mut cov = [Coverage::default(); 3];
             for (e, m) in members.iter().enumerate() {
                 if let Some(i) = m {
-                    cov[e] = cover(t, pose, e, cands, &list[*i]);
+                    cov[e] = cover(pose, turned[e], cands, &list[*i]);
                     // Every line of a hypothesis must be part of the tip it proposes.
                     if cov[e].visible < MIN_MEMBER_PX || cov[e].fraction() < MIN_MEMBER_FRACTION {
                         return None;
@@ -299,6 +301,13 @@ fn solve3(r: &[LineRow; 3]) -> Option<([f64; 2], f64)> {
     Some(([x[0], x[1]], x[2]))
 }
 
+/// The scales of the scan, `SCALE_MIN * SCALE_STEP^k` (tabulated: `powi` per step was
+/// a few percent of a cluttered frame).
+fn scale_grid() -> &'static [f64; SCALE_STEPS_MAX] {
+    static GRID: std::sync::OnceLock<[f64; SCALE_STEPS_MAX]> = std::sync::OnceLock::new();
+    GRID.get_or_init(|| std::array::from_fn(|k| SCALE_MIN * SCALE_STEP.powi(k as i32)))
+}
+
 /// Two lines leave the scale free: the apex moves along `a0 + scale * a1`. Scans the
 /// scale on a log grid and keeps the best-scoring placement.
 fn scan_scale(
@@ -321,8 +330,7 @@ fn scan_scale(
     let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
     let mut scores = [f64::NEG_INFINITY; SCALE_STEPS_MAX];
     let mut best_k = 0;
-    for (k, slot) in scores.iter_mut().enumerate() {
-        let scale = SCALE_MIN * SCALE_STEP.powi(k as i32);
+    for (k, (slot, &scale)) in scores.iter_mut().zip(scale_grid()).enumerate() {
         if scale > SCALE_MAX {
             break;
         }
@@ -413,18 +421,33 @@ fn end_margin(length: f64) -> f64 {
 
 /// The stretch of edge `e` a hypothesis is scored on (red: only near the tip).
 fn segment(t: &Template, pose: &Pose, e: usize) -> ([f64; 2], [f64; 2]) {
-    if e == RED {
-        let (a, b) = t.red_near_tip(RED_SCORE_HEIGHTS);
-        let red = &t.edges[RED];
-        (t.place(pose, red.point(a)), t.place(pose, red.point(b)))
-    } else {
-        t.segment(pose, e)
-    }
+    placed(pose, turned_segment(t, pose.psi, e))
 }
 
-/// Coverage of edge `e`'s predicted segment by candidate `c`'s profile.
-fn cover(t: &Template, pose: &Pose, e: usize, cands: &Candidates, c: &Candidate) -> Coverage {
-    let (tip, far) = segment(t, pose, e);
+/// [`segment`] in the reference turned by `psi`, before scaling and moving it to an
+/// apex: the search tries many scales at one rotation, and recomputing the rotation's
+/// sine and cosine for each was a good part of its cost.
+fn turned_segment(t: &Template, psi: f64, e: usize) -> ([f64; 2], [f64; 2]) {
+    let edge = &t.edges[e];
+    let (a, b) = if e == RED {
+        t.red_near_tip(RED_SCORE_HEIGHTS)
+    } else {
+        (edge.tip_tau, edge.far_tau)
+    };
+    (rotate(edge.point(a), psi), rotate(edge.point(b), psi))
+}
+
+/// A [`turned_segment`] scaled and moved to the pose's apex (what `Template::place`
+/// computes, in the same order, so the result is the same to the bit).
+fn placed(pose: &Pose, turned: ([f64; 2], [f64; 2])) -> ([f64; 2], [f64; 2]) {
+    let place = |q| add(pose.apex, scale(q, pose.scale));
+    (place(turned.0), place(turned.1))
+}
+
+/// Coverage of an edge's predicted segment (`turned` by the pose's rotation, see
+/// [`turned_segment`]) by candidate `c`'s profile.
+fn cover(pose: &Pose, turned: ([f64; 2], [f64; 2]), cands: &Candidates, c: &Candidate) -> Coverage {
+    let (tip, far) = placed(pose, turned);
     let length = norm(sub(far, tip));
     let t_tip = Candidates::t_of(c, tip);
     let t_far = Candidates::t_of(c, far);

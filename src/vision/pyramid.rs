@@ -211,7 +211,7 @@ fn bin_into(
     out: &mut [f32],
     hist: &mut [u32; 256],
 ) {
-    hist.fill(0);
+    let mut partial = [[0u32; 256]; 4];
     let shift = (factor * factor).trailing_zeros();
     let power_of_two = (factor * factor).is_power_of_two();
     let stride = frame.width() as usize;
@@ -247,14 +247,19 @@ fn bin_into(
         {
             *o = s as f32 * inv;
         }
-        for &s in sums.iter() {
+        // Four histograms taken in turn: consecutive pixels of one level no longer wait
+        // on each other's increment.
+        for (k, &s) in sums.iter().enumerate() {
             let level = if power_of_two {
                 s >> shift
             } else {
                 s / (factor * factor) as u32
             };
-            hist[level.min(255) as usize] += 1;
+            partial[k % 4][level.min(255) as usize] += 1;
         }
+    }
+    for (i, h) in hist.iter_mut().enumerate() {
+        *h = partial.iter().map(|p| p[i]).sum();
     }
 }
 

@@ -147,7 +147,6 @@ fn accumulate_edge(
     // The normal matrix is accumulated in f32 lanes (its rounding only slows the
     // convergence a little), flushed into f64 every BLOCK samples; the gradient, which
     // decides where the fit stops, stays in f64.
-    const LANES: usize = 4;
     const BLOCK: usize = 64;
     let mut h_total = [0.0f64; 36];
     let mut h = [[0.0f32; LANES]; 36];
@@ -160,31 +159,6 @@ fn accumulate_edge(
     let mut res = [0.0f64; LANES];
     let mut lane = 0;
     let mut pending = 0;
-    let flush = |j: &[[f64; LANES]; 8],
-                 wt: &[f64; LANES],
-                 res: &[f64; LANES],
-                 h: &mut [[f32; LANES]; 36],
-                 g: &mut [[f64; LANES]; 8]| {
-        let mut jf = [[0.0f32; LANES]; 8];
-        let mut wf = [[0.0f32; LANES]; 8];
-        for a in 0..8 {
-            for l in 0..LANES {
-                let wa = wt[l] * j[a][l];
-                g[a][l] += wa * res[l];
-                jf[a][l] = j[a][l] as f32;
-                wf[a][l] = wa as f32;
-            }
-        }
-        let mut k = 0;
-        for a in 0..8 {
-            for b in a..8 {
-                for l in 0..LANES {
-                    h[k][l] += wf[a][l] * jf[b][l];
-                }
-                k += 1;
-            }
-        }
-    };
     let drain = |h: &mut [[f32; LANES]; 36], total: &mut [f64; 36]| {
         for (t, v) in total.iter_mut().zip(h.iter_mut()) {
             *t += v.iter().map(|&x| x as f64).sum::<f64>();
@@ -249,5 +223,42 @@ fn accumulate_edge(
         g: g.map(|v| v.iter().sum()),
         sq,
         wsum,
+    }
+}
+
+/// Samples in flight through [`flush`] at once.
+const LANES: usize = 4;
+
+/// Adds four samples' Jacobians `j`, weights `wt` and residuals `res` to the normal
+/// matrix lanes `h` (f32, upper triangle) and the gradient lanes `g`. Inlined: it runs
+/// for every four samples, and as a call it kept the lanes in memory.
+// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn flush(
+    j: &[[f64; LANES]; 8],
+    wt: &[f64; LANES],
+    res: &[f64; LANES],
+    h: &mut [[f32; LANES]; 36],
+    g: &mut [[f64; LANES]; 8],
+) {
+    let mut jf = [[0.0f32; LANES]; 8];
+    let mut wf = [[0.0f32; LANES]; 8];
+    for a in 0..8 {
+        for l in 0..LANES {
+            let wa = wt[l] * j[a][l];
+            g[a][l] += wa * res[l];
+            jf[a][l] = j[a][l] as f32;
+            wf[a][l] = wa as f32;
+        }
+    }
+    let mut k = 0;
+    for a in 0..8 {
+        for b in a..8 {
+            for l in 0..LANES {
+                h[k][l] += wf[a][l] * jf[b][l];
+            }
+            k += 1;
+        }
     }
 }
