@@ -2,7 +2,7 @@
 //! accumulated into the normal equations (about 44 products per sample and iteration,
 //! which is where the tracker spends a third of its time).
 
-use super::gauss::cdf_pdf;
+use super::gauss::cdf_pdf_lanes;
 use super::solve::Normal;
 use super::{
     EdgeFrame, Refiner, Sample, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS, PHOTO,
@@ -165,49 +165,42 @@ fn accumulate_edge(
             *v = [0.0; LANES];
         }
     };
-    for s in samples.iter().step_by(step) {
-        let rel = [s.x as f64 - f.origin[0], s.y as f64 - f.origin[1]];
-        let u = p.along[0] * rel[0] + p.along[1] * rel[1];
-        let w = if f.curved {
-            (f.towards * (u - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
-        } else {
-            0.0
-        };
-        let w3 = w * w * w;
-        let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3;
-        let z = d * inv_blur;
-        let (cdf, pdf) = cdf_pdf(z);
-        let un = u * (1.0 / ALONG_UNIT_PX);
-        let contrast = p.photo[2] + p.photo[3] * un;
-        let r = s.value as f64 - (p.photo[0] + p.photo[1] * un + contrast * cdf);
-        let c = s.chunk as usize;
-        chunk_sq[c] += r * r;
-        chunk_n[c] += 1;
-        if !chunk_ok[c] {
-            continue;
-        }
-        let weight = if r.abs() <= p.huber {
-            1.0
-        } else {
-            p.huber / r.abs()
-        };
-        sq += weight * r * r;
-        wsum += weight;
-        let dd = contrast * pdf * inv_blur;
-        let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
-        for (ja, v) in j.iter_mut().zip(jac) {
-            ja[lane] = v;
-        }
-        wt[lane] = weight;
-        res[lane] = r;
-        lane += 1;
-        if lane == LANES {
-            flush(&j, &wt, &res, &mut h, &mut g);
-            lane = 0;
-            pending += LANES;
-            if pending >= BLOCK {
-                drain(&mut h, &mut h_total);
-                pending = 0;
+    let mut batch = Batch::default();
+    let mut todo = samples.iter().step_by(step);
+    while batch.fill(&mut todo) > 0 {
+        let m = batch.model(f, p, inv_blur, corner_t);
+        for l in 0..batch.len {
+            let (u, w3, z, un) = (m.u[l], m.w3[l], m.z[l], m.un[l]);
+            let (cdf, pdf, contrast, r) = (m.cdf[l], m.pdf[l], m.contrast[l], m.r[l]);
+            let c = batch.chunk[l];
+            chunk_sq[c] += r * r;
+            chunk_n[c] += 1;
+            if !chunk_ok[c] {
+                continue;
+            }
+            let weight = if r.abs() <= p.huber {
+                1.0
+            } else {
+                p.huber / r.abs()
+            };
+            sq += weight * r * r;
+            wsum += weight;
+            let dd = contrast * pdf * inv_blur;
+            let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
+            for (ja, v) in j.iter_mut().zip(jac) {
+                ja[lane] = v;
+            }
+            wt[lane] = weight;
+            res[lane] = r;
+            lane += 1;
+            if lane == LANES {
+                flush(&j, &wt, &res, &mut h, &mut g);
+                lane = 0;
+                pending += LANES;
+                if pending >= BLOCK {
+                    drain(&mut h, &mut h_total);
+                    pending = 0;
+                }
             }
         }
     }
@@ -259,6 +252,88 @@ fn flush(
                 h[k][l] += wf[a][l] * jf[b][l];
             }
             k += 1;
+        }
+    }
+}
+
+/// Up to [`LANES`] samples, unpacked for lane arithmetic.
+#[derive(Default)]
+struct Batch {
+    x: [f64; LANES],
+    y: [f64; LANES],
+    value: [f64; LANES],
+    chunk: [usize; LANES],
+    /// Lanes holding a sample (the rest keep stale, finite values).
+    len: usize,
+}
+
+/// The model and residual of a [`Batch`]'s samples, lane by lane (the quantities of
+/// the fit's equations; see the module `refine`).
+struct ModelLanes {
+    u: [f64; LANES],
+    w3: [f64; LANES],
+    z: [f64; LANES],
+    un: [f64; LANES],
+    cdf: [f64; LANES],
+    pdf: [f64; LANES],
+    contrast: [f64; LANES],
+    r: [f64; LANES],
+}
+
+impl Batch {
+    /// Takes the next samples from `todo`; returns how many.
+    fn fill<'a>(&mut self, todo: &mut impl Iterator<Item = &'a Sample>) -> usize {
+        self.len = 0;
+        for s in todo.take(LANES) {
+            let l = self.len;
+            (self.x[l], self.y[l]) = (s.x as f64, s.y as f64);
+            self.value[l] = s.value as f64;
+            self.chunk[l] = s.chunk as usize;
+            self.len += 1;
+        }
+        self.len
+    }
+
+    /// Model and residual of every lane. Each lane computes exactly what a sample at a
+    /// time did (same operations, same order), four at a time so that the compiler
+    /// turns it into vector arithmetic.
+    // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn model(&self, f: &EdgeFrame, p: &EdgeParams, inv_blur: f64, corner_t: f64) -> ModelLanes {
+        let mut u = [0.0; LANES];
+        let mut w3 = [0.0; LANES];
+        let mut z = [0.0; LANES];
+        let mut un = [0.0; LANES];
+        for l in 0..LANES {
+            let rel = [self.x[l] - f.origin[0], self.y[l] - f.origin[1]];
+            u[l] = p.along[0] * rel[0] + p.along[1] * rel[1];
+            let w = if f.curved {
+                (f.towards * (u[l] - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
+            } else {
+                0.0
+            };
+            w3[l] = w * w * w;
+            let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3[l];
+            z[l] = d * inv_blur;
+            un[l] = u[l] * (1.0 / ALONG_UNIT_PX);
+        }
+        let (cdf, pdf) = cdf_pdf_lanes(&z);
+        let mut contrast = [0.0; LANES];
+        let mut r = [0.0; LANES];
+        for l in 0..LANES {
+            contrast[l] = p.photo[2] + p.photo[3] * un[l];
+            r[l] = self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast[l] * cdf[l]);
+        }
+        ModelLanes {
+            u,
+            w3,
+            z,
+            un,
+            cdf,
+            pdf,
+            contrast,
+            r,
         }
     }
 }
