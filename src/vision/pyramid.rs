@@ -220,17 +220,19 @@ fn bin_into(
     let mut sums = [0u32; 1024];
     debug_assert!(width <= sums.len());
     let sums = &mut sums[..width];
+    let mut columns = [0u16; 2048];
     for by in 0..height {
         if factor == 2 {
             // The common case in one pass over both rows.
             let r0 = &raw[2 * by * stride..][..2 * width];
             let r1 = &raw[(2 * by + 1) * stride..][..2 * width];
-            for ((s, a), b) in sums
-                .iter_mut()
-                .zip(r0.chunks_exact(2))
-                .zip(r1.chunks_exact(2))
-            {
-                *s = a[0] as u32 + a[1] as u32 + b[0] as u32 + b[1] as u32;
+            // Columns first (vectorises), then pairs of columns.
+            let columns = &mut columns[..2 * width];
+            for ((c, &a), &b) in columns.iter_mut().zip(r0).zip(r1) {
+                *c = a as u16 + b as u16;
+            }
+            for (s, c) in sums.iter_mut().zip(columns.chunks_exact(2)) {
+                *s = (c[0] + c[1]) as u32;
             }
         } else {
             sums.iter_mut().for_each(|s| *s = 0);
@@ -249,13 +251,22 @@ fn bin_into(
         }
         // Four histograms taken in turn: consecutive pixels of one level no longer wait
         // on each other's increment.
-        for (k, &s) in sums.iter().enumerate() {
+        let level = |s: u32| {
             let level = if power_of_two {
                 s >> shift
             } else {
                 s / (factor * factor) as u32
             };
-            partial[k % 4][level.min(255) as usize] += 1;
+            level.min(255) as usize
+        };
+        let quads = sums.chunks_exact(4);
+        for &s in quads.remainder() {
+            partial[0][level(s)] += 1;
+        }
+        for quad in quads {
+            for (h, &s) in partial.iter_mut().zip(quad) {
+                h[level(s)] += 1;
+            }
         }
     }
     for (i, h) in hist.iter_mut().enumerate() {
