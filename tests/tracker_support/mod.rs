@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use image::GrayImage;
 use nanoforce::config::Config;
+pub use nanoforce::session::score::{percentile, Score};
 use nanoforce::vision::{Calibration, Estimate, Tracker};
 
 /// One row of a truth.csv.
@@ -106,35 +107,6 @@ impl Session {
     }
 }
 
-/// Scores as score.py does.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Score {
-    pub frames: usize,
-    pub positives: usize,
-    pub detect_rate: f64,
-    pub false_detections: usize,
-    pub angle_err_median_deg: f64,
-    pub angle_err_p95_deg: f64,
-    pub angle_err_max_deg: f64,
-    pub tip_err_median_px: f64,
-}
-
-/// numpy's default (linear) percentile of unsorted data.
-pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::INFINITY;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let pos = q / 100.0 * (v.len() - 1) as f64;
-    let (i, frac) = (pos.floor() as usize, pos - pos.floor());
-    if i + 1 < v.len() {
-        v[i] + frac * (v[i + 1] - v[i])
-    } else {
-        v[i]
-    }
-}
-
 pub fn angle_errors(truth: &[Truth], est: &[Estimate]) -> Vec<f64> {
     truth
         .iter()
@@ -144,6 +116,8 @@ pub fn angle_errors(truth: &[Truth], est: &[Estimate]) -> Vec<f64> {
         .collect()
 }
 
+/// score.py's numbers for estimates in truth order (rendered sessions repeat frame
+/// names, so rows are paired by position rather than by name as the library does).
 pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {
     let positives = truth.iter().filter(|t| t.detected).count();
     let detected = truth
@@ -173,11 +147,7 @@ pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {
         false_detections,
         angle_err_median_deg: percentile(&ang, 50.0),
         angle_err_p95_deg: percentile(&ang, 95.0),
-        angle_err_max_deg: ang
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max)
-            .max(if ang.is_empty() { f64::INFINITY } else { 0.0 }),
+        angle_err_max_deg: percentile(&ang, 100.0),
         tip_err_median_px: percentile(&tip, 50.0),
     }
 }
