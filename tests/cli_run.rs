@@ -29,6 +29,19 @@ fn wait_with_timeout(child: &mut std::process::Child, limit: Duration) -> std::p
     }
 }
 
+/// Waits (at most 5 s) for a child spawned with piped stderr; its status and stderr.
+fn exit_and_stderr(child: &mut std::process::Child) -> (std::process::ExitStatus, String) {
+    let status = wait_with_timeout(child, Duration::from_secs(5));
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    (status, err)
+}
+
 fn sessions(state: &std::path::Path) -> Vec<std::path::PathBuf> {
     std::fs::read_dir(state.join("sessions"))
         .map(|d| d.map(|e| e.unwrap().path()).collect())
@@ -119,14 +132,7 @@ fn sigterm_and_sigint_stop_cleanly() {
             .unwrap();
         std::thread::sleep(Duration::from_millis(1500));
         signal(child.id(), sig);
-        let status = wait_with_timeout(&mut child, Duration::from_secs(5));
-        let mut err = String::new();
-        child
-            .stderr
-            .take()
-            .unwrap()
-            .read_to_string(&mut err)
-            .unwrap();
+        let (status, err) = exit_and_stderr(&mut child);
         assert!(status.success(), "signal {sig}: {status:?}\n{err}");
         assert!(err.contains("stopping (Signal("), "{err}");
         assert!(sessions(dir.path())[0].join("stats.json").exists());
@@ -163,14 +169,7 @@ fn sighup_reloads_valid_gains_and_rejects_an_invalid_file() {
     signal(child.id(), libc::SIGHUP);
     std::thread::sleep(Duration::from_millis(500));
     signal(child.id(), libc::SIGTERM);
-    let status = wait_with_timeout(&mut child, Duration::from_secs(5));
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let (status, err) = exit_and_stderr(&mut child);
     assert!(status.success(), "{err}");
     assert!(
         err.contains("teleop.max_force_n") && err.contains("keeping the previous gains"),
