@@ -15,6 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#define FAKE_LOG_ENV "FAKE_COMEDI_LOG"
+#include "fake_log.h"
+
 typedef struct { double min; double max; unsigned int unit; } comedi_range;
 typedef struct { int open; } comedi_t;
 
@@ -23,19 +26,6 @@ static int last_errno;
 static long writes;
 static comedi_range ao_ranges[2] = {{-10.0, 10.0, 0}, {0.0, 5.0, 0}};
 static comedi_range counter_range = {0.0, 16777215.0, 2};
-
-static void logf_(const char *fmt, ...) {
-    const char *path = getenv("FAKE_COMEDI_LOG");
-    if (!path) return;
-    FILE *f = fopen(path, "a");
-    if (!f) return;
-    va_list ap;
-    va_start(ap, fmt);
-    vfprintf(f, fmt, ap);
-    va_end(ap);
-    fputc('\n', f);
-    fclose(f);
-}
 
 static int no_ao(void) {
     const char *b = getenv("FAKE_COMEDI_BOARD");

@@ -11,6 +11,9 @@
 #include <string.h>
 #include <wchar.h>
 
+#define FAKE_LOG_ENV "FAKE_HID_LOG"
+#include "fake_log.h"
+
 struct hid_device_info {
     char *path;
     unsigned short vendor_id, product_id;
@@ -26,19 +29,6 @@ typedef struct { FILE *reports; int unplugged; } hid_device;
 
 static hid_device the_device;
 static const wchar_t *last_error = L"";
-
-static void logf_(const char *fmt, ...) {
-    const char *path = getenv("FAKE_HID_LOG");
-    if (!path) return;
-    FILE *f = fopen(path, "a");
-    if (!f) return;
-    va_list ap;
-    va_start(ap, fmt);
-    vfprintf(f, fmt, ap);
-    va_end(ap);
-    fputc('\n', f);
-    fclose(f);
-}
 
 static unsigned short env_id(const char *name) {
     const char *v = getenv(name);

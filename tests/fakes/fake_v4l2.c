@@ -26,6 +26,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#define FAKE_LOG_ENV "FAKE_V4L2_LOG"
+#include "fake_log.h"
+
 #define MAX_BUFS 8
 #define OFFSET_STEP 0x100000L
 
@@ -35,19 +38,6 @@ static unsigned num = 1, den = 30, sequence, nbufs;
 static struct { void *ptr; int queued; long order; } bufs[MAX_BUFS];
 static long queue_order;
 static struct timespec next_frame;
-
-static void logf_(const char *fmt, ...) {
-    const char *path = getenv("FAKE_V4L2_LOG");
-    if (!path) return;
-    FILE *f = fopen(path, "a");
-    if (!f) return;
-    va_list ap;
-    va_start(ap, fmt);
-    vfprintf(f, fmt, ap);
-    va_end(ap);
-    fputc('\n', f);
-    fclose(f);
-}
 
 static const char *device_path(void) {
     const char *p = getenv("FAKE_V4L2_PATH");
