@@ -1,9 +1,7 @@
 //! The 1 kHz loop must not allocate in steady state. A counting global allocator counts
 //! allocations made on the haptic loop's thread only (the fake haptic device marks that
 //! thread on its first read); the devices here are atomics-only so they add nothing.
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -16,31 +14,10 @@ use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
 use nanoforce::hw::haptic::{HapticDevice, HapticError};
 use nanoforce::hw::Clock;
 
-thread_local! {
-    static ON_LOOP_THREAD: Cell<bool> = const { Cell::new(false) };
-}
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static LOOP_ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-struct Counting;
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) && ON_LOOP_THREAD.with(Cell::get) {
-            LOOP_ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as ours.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as ours.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod alloc_counter;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 struct Frames(Clock, u64);
 impl FrameSource for Frames {
@@ -95,7 +72,7 @@ impl HapticDevice for Haptic {
         "haptic"
     }
     fn read(&mut self, now_s: f64) -> Result<HapticSample, HapticError> {
-        ON_LOOP_THREAD.with(|c| c.set(true));
+        alloc_counter::watch_this_thread();
         // Centred for the first 100 ms (to engage), then a slow lateral sweep.
         let x = if now_s < 0.1 {
             0.0
@@ -140,10 +117,10 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
     let handle = Daemon::start(TeleopGains::default(), devices, options).unwrap();
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(handle.loop_shared.state(), SafetyState::Engaged);
-    COUNTING.store(true, Ordering::SeqCst);
+    alloc_counter::start();
     let ticks_before = handle.loop_shared.ticks.load(Ordering::SeqCst);
     std::thread::sleep(Duration::from_millis(700));
-    COUNTING.store(false, Ordering::SeqCst);
+    let loop_allocations = alloc_counter::stop();
     let ticks = handle.loop_shared.ticks.load(Ordering::SeqCst) - ticks_before;
     handle.stop();
     handle.wait().unwrap();
@@ -152,9 +129,5 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
         f64::from_bits(velocity.load(Ordering::SeqCst)) > 0.0,
         "and moved the stage"
     );
-    assert_eq!(
-        LOOP_ALLOCATIONS.load(Ordering::SeqCst),
-        0,
-        "allocations on the loop thread"
-    );
+    assert_eq!(loop_allocations, 0, "allocations on the loop thread");
 }

@@ -1,37 +1,14 @@
 //! The tracker's side of the monitor must not allocate once warm: after the first copy of
 //! a frame size into each of the triple buffer's slots, offering frames and estimates
 //! allocates nothing (a counting allocator counts this thread's allocations).
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use image::GrayImage;
 use nanoforce::daemon::snapshot::snapshot_channel;
 use nanoforce::daemon::PublishedEstimate;
 
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-struct Counting;
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            ALLOCATIONS.with(|a| a.set(a.get() + 1));
-        }
-        // SAFETY: same contract as ours.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as ours.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod alloc_counter;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 #[test]
 fn offering_snapshots_does_not_allocate_after_warm_up() {
@@ -51,12 +28,12 @@ fn offering_snapshots_does_not_allocate_after_warm_up() {
         reader.frames.update();
         while reader.estimates.pop().is_ok() {}
     }
-    COUNTING.with(|c| c.set(true));
+    alloc_counter::watch_this_thread();
+    alloc_counter::start();
     for _ in 0..20 {
         offer(&mut tap, 6);
     }
-    COUNTING.with(|c| c.set(false));
-    assert_eq!(ALLOCATIONS.with(Cell::get), 0, "allocations in 120 offers");
+    assert_eq!(alloc_counter::stop(), 0, "allocations in 120 offers");
     assert!(reader.frames.update(), "and frames still arrive");
     assert_eq!(reader.frames.output_buffer_mut().image.width(), 640);
 }

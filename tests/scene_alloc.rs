@@ -1,37 +1,13 @@
 //! The simulated lab renders one frame per 60 Hz tick: once a frame of a size has been
 //! drawn, `Renderer::render_into` must not allocate. A counting global allocator counts
 //! allocations on this test's thread while it renders.
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
-
 use image::GrayImage;
 use nanoforce::scene::{FrameSpec, Renderer, Style};
 
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-struct Counting;
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as ours.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as ours.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod alloc_counter;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 #[test]
 fn rendering_into_a_reused_frame_allocates_nothing_after_warm_up() {
@@ -45,10 +21,10 @@ fn rendering_into_a_reused_frame_allocates_nothing_after_warm_up() {
     };
     // Warm up: the first frame sizes the buffers.
     renderer.render_into(&spec(1000), &mut frame);
-    COUNTING.with(|c| c.set(true));
+    alloc_counter::watch_this_thread();
+    alloc_counter::start();
     for k in 0..24 {
         renderer.render_into(&spec(k), &mut frame);
     }
-    COUNTING.with(|c| c.set(false));
-    assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 0);
+    assert_eq!(alloc_counter::stop(), 0);
 }

@@ -1,47 +1,20 @@
 //! Tracking allocates nothing per frame after warm-up: a counting global allocator in
 //! this test binary of its own watches frames of both sizes, busy and blank, with and
 //! without coherence.
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
 use image::GrayImage;
 use nanoforce::scene::{self, render_into};
 use nanoforce::vision::Tracker;
 
 mod tracker_support;
 
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards every call to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as ours.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as ours.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as ours.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+mod alloc_counter;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
 #[test]
 fn tracking_allocates_nothing_after_warm_up() {
+    alloc_counter::watch_this_thread();
     // One 640x480 and one 1280x960 session of the suite, frames rendered up front.
     let sessions = scene::suite(41, 3, 24);
     for session in [&sessions[0], &sessions[2]] {
@@ -60,13 +33,11 @@ fn tracking_allocates_nothing_after_warm_up() {
         let mut detected = 0;
         for coherence in [true, false] {
             tracker.set_coherence(coherence);
-            ALLOCATIONS.store(0, Ordering::SeqCst);
-            COUNTING.store(true, Ordering::SeqCst);
+            alloc_counter::start();
             for frame in &frames {
                 detected += tracker.track(frame).detected as usize;
             }
-            COUNTING.store(false, Ordering::SeqCst);
-            let n = ALLOCATIONS.load(Ordering::SeqCst);
+            let n = alloc_counter::stop();
             assert_eq!(
                 n,
                 0,
