@@ -33,6 +33,7 @@ mod hypothesis;
 mod overlay;
 mod pyramid;
 mod refine;
+mod simd;
 mod template;
 mod tracker;
 mod verify;
@@ -42,6 +43,7 @@ use std::fmt;
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
 pub use overlay::{draw_calibration, draw_overlay};
+pub use simd::set_avx2;
 pub use tracker::Tracker;
 
 /// The three tracked edges of the tip (the paper's red, blue and green lines).

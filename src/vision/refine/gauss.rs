@@ -5,16 +5,20 @@
 const CDF_RANGE: f64 = 8.0;
 const CDF_STEPS: f64 = 16.0;
 const CDF_NODES: usize = (2.0 * CDF_RANGE * CDF_STEPS) as usize + 2;
-static CDF_TABLE: std::sync::OnceLock<[[f64; 2]; CDF_NODES]> = std::sync::OnceLock::new();
+static CDF_TABLE: std::sync::OnceLock<CdfTable> = std::sync::OnceLock::new();
 
-fn cdf_table() -> &'static [[f64; 2]; CDF_NODES] {
+/// The tabulated values and slopes, [`cdf_table`]'s.
+pub(super) struct CdfTable([[f64; 2]; CDF_NODES]);
+
+/// The table, computed on first use (fetch it once per loop, not per value).
+pub(super) fn cdf_table() -> &'static CdfTable {
     CDF_TABLE.get_or_init(|| {
         let mut t = [[0.0; 2]; CDF_NODES];
         for (k, node) in t.iter_mut().enumerate() {
             let z = -CDF_RANGE + k as f64 / CDF_STEPS;
             *node = [normal_cdf(z), normal_pdf(z)];
         }
-        t
+        CdfTable(t)
     })
 }
 
@@ -31,7 +35,7 @@ fn cdf_pdf(z: f64) -> (f64, f64) {
     if k + 1 >= CDF_NODES {
         return (1.0, 0.0);
     }
-    let table = cdf_table();
+    let table = &cdf_table().0;
     let (a, b) = (table[k], table[k + 1]);
     let t = pos - k as f64;
     let h = 1.0 / CDF_STEPS;
@@ -49,16 +53,18 @@ fn cdf_pdf(z: f64) -> (f64, f64) {
 // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-pub(super) fn cdf_pdf_lanes(z: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
-    let table = cdf_table();
+pub(super) fn cdf_pdf_lanes(table: &CdfTable, z: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    let table = &table.0;
     let pos = z.map(|z| (z + CDF_RANGE) * CDF_STEPS);
     let (mut a, mut b) = ([[0.0; 2]; 4], [[0.0; 2]; 4]);
     let mut t = [0.0; 4];
+    // The node below each value, clamped to the table (out of its range the node does
+    // not matter: the value is replaced below), is truncated in range, and the same
+    // as clamping after the truncation.
+    let k = pos.map(|p| p.max(0.0).min((CDF_NODES - 2) as f64) as i32 as usize);
     for l in 0..4 {
-        // Out of the table's range the node does not matter: the value is replaced below.
-        let k = (pos[l].max(0.0) as usize).min(CDF_NODES - 2);
-        (a[l], b[l]) = (table[k], table[k + 1]);
-        t[l] = pos[l] - k as f64;
+        (a[l], b[l]) = (table[k[l]], table[k[l] + 1]);
+        t[l] = pos[l] - k[l] as f64;
     }
     let (mut cdf, mut pdf) = ([0.0; 4], [0.0; 4]);
     let h = 1.0 / CDF_STEPS;
@@ -72,7 +78,7 @@ pub(super) fn cdf_pdf_lanes(z: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
         pdf[l] = a[1] + t * (b[1] - a[1]);
         if pos[l] <= 0.0 {
             (cdf[l], pdf[l]) = (0.0, 0.0);
-        } else if pos[l] as usize + 1 >= CDF_NODES {
+        } else if pos[l] >= (CDF_NODES - 1) as f64 {
             (cdf[l], pdf[l]) = (1.0, 0.0);
         }
     }
@@ -114,7 +120,7 @@ mod tests {
     fn four_at_a_time_is_the_same_to_the_bit() {
         for i in -2000..=2000 {
             let z = [0.0, 0.37, -0.011, 5.5].map(|o| i as f64 * 0.0047 + o);
-            let (c, p) = cdf_pdf_lanes(&z);
+            let (c, p) = cdf_pdf_lanes(cdf_table(), &z);
             for l in 0..4 {
                 let (c1, p1) = cdf_pdf(z[l]);
                 assert_eq!(

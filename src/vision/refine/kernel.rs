@@ -1,14 +1,16 @@
 //! The inner loop of the fit: every sample's residual, robust weight and Jacobian,
 //! accumulated into the normal equations (about 44 products per sample and iteration,
-//! which is where the tracker spends a third of its time).
+//! which is where the tracker spends a quarter to a third of its time). It runs as an
+//! AVX2 copy where the CPU has it (`vision::simd`).
 
-use super::gauss::cdf_pdf_lanes;
+use super::gauss::{cdf_pdf_lanes, cdf_table, CdfTable};
 use super::solve::Normal;
 use super::{
     EdgeFrame, Refiner, Sample, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS, PHOTO,
     P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN,
 };
 use crate::vision::geometry::{along, dot, rotate, sub};
+use crate::vision::simd::dispatch;
 
 impl Refiner {
     pub(super) fn normal_equations(
@@ -135,7 +137,8 @@ struct EdgeSums {
 /// sample of the normal equations.
 // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
 #[allow(clippy::needless_range_loop)]
-fn accumulate_edge(
+#[inline(always)]
+fn accumulate_edge_body(
     samples: &[Sample],
     step: usize,
     f: &EdgeFrame,
@@ -144,83 +147,148 @@ fn accumulate_edge(
     chunk_sq: &mut [f64],
     chunk_n: &mut [u32],
 ) -> EdgeSums {
-    // The normal matrix is accumulated in f32 lanes (its rounding only slows the
-    // convergence a little), flushed into f64 every BLOCK samples; the gradient, which
-    // decides where the fit stops, stays in f64.
-    const BLOCK: usize = 64;
-    let mut h_total = [0.0f64; 36];
-    let mut h = [[0.0f32; LANES]; 36];
-    let mut g = [[0.0f64; LANES]; 8];
+    let mut acc = Accumulator::default();
     let (mut sq, mut wsum) = (0.0, 0.0);
     let inv_blur = 1.0 / p.blur;
     let corner_t = dot(p.along, sub(f.corner, f.origin));
-    let mut j = [[0.0f64; LANES]; 8];
-    let mut wt = [0.0f64; LANES];
-    let mut res = [0.0f64; LANES];
-    let mut lane = 0;
-    let mut pending = 0;
-    let drain = |h: &mut [[f32; LANES]; 36], total: &mut [f64; 36]| {
-        for (t, v) in total.iter_mut().zip(h.iter_mut()) {
-            *t += v.iter().map(|&x| x as f64).sum::<f64>();
-            *v = [0.0; LANES];
-        }
-    };
+    let table = cdf_table();
     let mut batch = Batch::default();
-    let mut todo = samples.iter().step_by(step);
-    while batch.fill(&mut todo) > 0 {
-        let m = batch.model(f, p, inv_blur, corner_t);
+    for first in (0..samples.len()).step_by(LANES * step) {
+        batch.fill(samples, first, step);
+        let m = batch.model(table, f, p, inv_blur, corner_t);
+        // The sums run sample after sample, in the samples' order.
+        let mut all_ok = batch.len == LANES;
         for l in 0..batch.len {
-            let (u, w3, z, un) = (m.u[l], m.w3[l], m.z[l], m.un[l]);
-            let (cdf, pdf, contrast, r) = (m.cdf[l], m.pdf[l], m.contrast[l], m.r[l]);
             let c = batch.chunk[l];
-            chunk_sq[c] += r * r;
+            chunk_sq[c] += m.r2[l];
             chunk_n[c] += 1;
-            if !chunk_ok[c] {
-                continue;
-            }
-            let weight = if r.abs() <= p.huber {
-                1.0
+            if chunk_ok[c] {
+                sq += m.wr2[l];
+                wsum += m.weight[l];
             } else {
-                p.huber / r.abs()
-            };
-            sq += weight * r * r;
-            wsum += weight;
-            let dd = contrast * pdf * inv_blur;
-            let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
-            for (ja, v) in j.iter_mut().zip(jac) {
-                ja[lane] = v;
+                all_ok = false;
             }
-            wt[lane] = weight;
-            res[lane] = r;
-            lane += 1;
-            if lane == LANES {
-                flush(&j, &wt, &res, &mut h, &mut g);
-                lane = 0;
-                pending += LANES;
-                if pending >= BLOCK {
-                    drain(&mut h, &mut h_total);
-                    pending = 0;
-                }
+        }
+        if all_ok && acc.lane == 0 {
+            // The common case: the batch's lanes are the accumulator's.
+            acc.add(&m.jac, &m.weight, &m.r);
+        } else {
+            for l in (0..batch.len).filter(|&l| chunk_ok[batch.chunk[l]]) {
+                acc.push(&m, l);
             }
         }
     }
-    if lane > 0 {
-        for l in lane..LANES {
-            wt[l] = 0.0;
-        }
-        flush(&j, &wt, &res, &mut h, &mut g);
-    }
-    drain(&mut h, &mut h_total);
-    EdgeSums {
-        h: h_total,
-        g: g.map(|v| v.iter().sum()),
-        sq,
-        wsum,
-    }
+    let (h, g) = acc.finish();
+    EdgeSums { h, g, sq, wsum }
+}
+
+dispatch! {
+    /// [`accumulate_edge_body`], with AVX2 when the CPU has it (see `vision::simd`).
+    fn accumulate_edge(
+        samples: &[Sample],
+        step: usize,
+        f: &EdgeFrame,
+        p: &EdgeParams,
+        chunk_ok: &[bool],
+        chunk_sq: &mut [f64],
+        chunk_n: &mut [u32],
+    ) -> EdgeSums => accumulate_edge_body
 }
 
 /// Samples in flight through [`flush`] at once.
 const LANES: usize = 4;
+
+/// The normal matrix is accumulated in f32 lanes (its rounding only slows the
+/// convergence a little), flushed into f64 every this many samples; the gradient, which
+/// decides where the fit stops, stays in f64.
+const BLOCK: usize = 64;
+
+/// One edge's normal equations being summed, lane by lane: lane `l` takes every fourth
+/// sample that counts (samples of rejected stretches are skipped, not zeroed).
+struct Accumulator {
+    h_total: [f64; 36],
+    h: [[f32; LANES]; 36],
+    g: [[f64; LANES]; 8],
+    /// Samples gathered one by one until their lanes are full (after a skipped sample
+    /// the batches no longer line up with the lanes).
+    j: [[f64; LANES]; 8],
+    wt: [f64; LANES],
+    res: [f64; LANES],
+    lane: usize,
+    /// Samples in `h` since the last drain.
+    pending: usize,
+}
+
+impl Default for Accumulator {
+    fn default() -> Self {
+        Accumulator {
+            h_total: [0.0; 36],
+            h: [[0.0; LANES]; 36],
+            g: [[0.0; LANES]; 8],
+            j: [[0.0; LANES]; 8],
+            wt: [0.0; LANES],
+            res: [0.0; LANES],
+            lane: 0,
+            pending: 0,
+        }
+    }
+}
+
+impl Accumulator {
+    /// Adds four samples at once (lanes in order).
+    #[inline(always)]
+    fn add(&mut self, j: &[[f64; LANES]; 8], wt: &[f64; LANES], res: &[f64; LANES]) {
+        flush(j, wt, res, &mut self.h, &mut self.g);
+        self.pending += LANES;
+        if self.pending >= BLOCK {
+            self.drain();
+        }
+    }
+
+    /// Adds lane `l` of `m` in the next free lane.
+    #[inline(always)]
+    fn push(&mut self, m: &ModelLanes, l: usize) {
+        for (ja, v) in self.j.iter_mut().zip(&m.jac) {
+            ja[self.lane] = v[l];
+        }
+        self.wt[self.lane] = m.weight[l];
+        self.res[self.lane] = m.r[l];
+        self.lane += 1;
+        if self.lane == LANES {
+            flush(&self.j, &self.wt, &self.res, &mut self.h, &mut self.g);
+            self.lane = 0;
+            self.pending += LANES;
+            if self.pending >= BLOCK {
+                self.drain();
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn drain(&mut self) {
+        for (t, v) in self.h_total.iter_mut().zip(self.h.iter_mut()) {
+            *t += v.iter().map(|&x| x as f64).sum::<f64>();
+            *v = [0.0; LANES];
+        }
+        self.pending = 0;
+    }
+
+    /// The matrix (upper triangle) and the gradient.
+    #[inline(always)]
+    fn finish(mut self) -> ([f64; 36], [f64; 8]) {
+        if self.lane > 0 {
+            // The free lanes add exact zeros.
+            self.wt[self.lane..].fill(0.0);
+            self.res[self.lane..].fill(0.0);
+            for ja in &mut self.j {
+                ja[self.lane..].fill(0.0);
+            }
+            flush(&self.j, &self.wt, &self.res, &mut self.h, &mut self.g);
+        }
+        self.drain();
+        (self.h_total, self.g.map(|v| v.iter().sum()))
+    }
+}
 
 /// Adds four samples' Jacobians `j`, weights `wt` and residuals `res` to the normal
 /// matrix lanes `h` (f32, upper triangle) and the gradient lanes `g`. Inlined: it runs
@@ -267,40 +335,59 @@ struct Batch {
     len: usize,
 }
 
-/// The model and residual of a [`Batch`]'s samples, lane by lane (the quantities of
-/// the fit's equations; see the module `refine`).
+/// The residuals of a [`Batch`]'s samples and what they add to the normal equations,
+/// lane by lane (see the module `refine` for the model).
 struct ModelLanes {
-    u: [f64; LANES],
-    w3: [f64; LANES],
-    z: [f64; LANES],
-    un: [f64; LANES],
-    cdf: [f64; LANES],
-    pdf: [f64; LANES],
-    contrast: [f64; LANES],
     r: [f64; LANES],
+    /// Squared residual, robust (Huber) weight, weighted squared residual.
+    r2: [f64; LANES],
+    weight: [f64; LANES],
+    wr2: [f64; LANES],
+    /// Jacobian: turn, offset, bend, blur, level, level slope, contrast, contrast slope.
+    jac: [[f64; LANES]; 8],
 }
 
 impl Batch {
-    /// Takes the next samples from `todo`; returns how many.
-    fn fill<'a>(&mut self, todo: &mut impl Iterator<Item = &'a Sample>) -> usize {
+    /// Takes the samples `first`, `first + step`, ... (up to [`LANES`] of them).
+    #[inline(always)]
+    fn fill(&mut self, samples: &[Sample], first: usize, step: usize) {
+        let rest = &samples[first..];
+        if step == 1 && rest.len() >= LANES {
+            // The common case, in a shape the compiler unrolls.
+            for (l, s) in rest[..LANES].iter().enumerate() {
+                self.set(l, s);
+            }
+            self.len = LANES;
+            return;
+        }
         self.len = 0;
-        for s in todo.take(LANES) {
-            let l = self.len;
-            (self.x[l], self.y[l]) = (s.x as f64, s.y as f64);
-            self.value[l] = s.value as f64;
-            self.chunk[l] = s.chunk as usize;
+        for s in rest.iter().step_by(step).take(LANES) {
+            self.set(self.len, s);
             self.len += 1;
         }
-        self.len
     }
 
-    /// Model and residual of every lane. Each lane computes exactly what a sample at a
-    /// time did (same operations, same order), four at a time so that the compiler
-    /// turns it into vector arithmetic.
+    #[inline(always)]
+    fn set(&mut self, l: usize, s: &Sample) {
+        (self.x[l], self.y[l]) = (s.x as f64, s.y as f64);
+        self.value[l] = s.value as f64;
+        self.chunk[l] = s.chunk as usize;
+    }
+
+    /// Model, residual, weight and Jacobian of every lane. Each lane computes exactly
+    /// what a sample at a time did (same operations, same order), four at a time so
+    /// that the compiler turns it into vector arithmetic.
     // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
-    fn model(&self, f: &EdgeFrame, p: &EdgeParams, inv_blur: f64, corner_t: f64) -> ModelLanes {
+    fn model(
+        &self,
+        table: &CdfTable,
+        f: &EdgeFrame,
+        p: &EdgeParams,
+        inv_blur: f64,
+        corner_t: f64,
+    ) -> ModelLanes {
         let mut u = [0.0; LANES];
         let mut w3 = [0.0; LANES];
         let mut z = [0.0; LANES];
@@ -318,22 +405,30 @@ impl Batch {
             z[l] = d * inv_blur;
             un[l] = u[l] * (1.0 / ALONG_UNIT_PX);
         }
-        let (cdf, pdf) = cdf_pdf_lanes(&z);
-        let mut contrast = [0.0; LANES];
-        let mut r = [0.0; LANES];
+        let (cdf, pdf) = cdf_pdf_lanes(table, &z);
+        let mut m = ModelLanes {
+            r: [0.0; LANES],
+            r2: [0.0; LANES],
+            weight: [0.0; LANES],
+            wr2: [0.0; LANES],
+            jac: [[0.0; LANES]; 8],
+        };
         for l in 0..LANES {
-            contrast[l] = p.photo[2] + p.photo[3] * un[l];
-            r[l] = self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast[l] * cdf[l]);
+            let contrast = p.photo[2] + p.photo[3] * un[l];
+            let r = self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast * cdf[l]);
+            let weight = if r.abs() <= p.huber {
+                1.0
+            } else {
+                p.huber / r.abs()
+            };
+            (m.r[l], m.r2[l], m.weight[l], m.wr2[l]) = (r, r * r, weight, weight * r * r);
+            let dd = contrast * pdf[l] * inv_blur;
+            let (u, w3, z, un, cdf) = (u[l], w3[l], z[l], un[l], cdf[l]);
+            let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
+            for (ja, v) in m.jac.iter_mut().zip(jac) {
+                ja[l] = v;
+            }
         }
-        ModelLanes {
-            u,
-            w3,
-            z,
-            un,
-            cdf,
-            pdf,
-            contrast,
-            r,
-        }
+        m
     }
 }
