@@ -10,6 +10,7 @@
 
 use super::geometry::wrap_pi;
 use super::pyramid::Pyramid;
+use super::simd::dispatch;
 
 /// Hysteresis thresholds in units of the gradient noise.
 const HIGH_SIGMAS: f32 = 5.0;
@@ -91,42 +92,58 @@ impl EdgeMap {
         self.noise = pyr.gradient_noise();
         let high = HIGH_SIGMAS * self.noise;
         let low = LOW_SIGMAS * self.noise;
-        self.suppress(pyr, low, high, threshold);
+        suppress(self, pyr, [low, high], threshold);
         self.hysteresis();
         self.collect(pyr);
     }
 
     /// Non-maximum suppression and the bright-side mask; marks WEAK/STRONG candidates.
+    /// Maxima are found [`RUN`] pixels at a time in vector arithmetic without branches
+    /// (the noise of a harsh frame mispredicted them); only they are visited.
+    #[inline(always)]
     fn suppress(&mut self, pyr: &Pyramid, low: f32, high: f32, threshold: f32) {
-        let (w, h) = (self.width, self.height);
-        for y in 3..h.saturating_sub(3) {
-            let row = &pyr.mag[y * w..(y + 1) * w];
-            for (x, &m) in row.iter().enumerate().take(w.saturating_sub(3)).skip(3) {
-                if m < low {
-                    continue;
-                }
-                let i = y * w + x;
-                let (dx, dy) = neighbour_step(pyr.gx[i], pyr.gy[i]);
-                let ahead = (i as isize + dy * w as isize + dx) as usize;
-                let behind = (i as isize - dy * w as isize - dx) as usize;
-                if m < pyr.mag[ahead] || m <= pyr.mag[behind] {
-                    continue;
-                }
-                let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
-                // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
-                let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as usize;
-                let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as usize;
-                if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
-                    continue;
-                }
-                self.marked.push(i as u32);
-                if m >= high {
-                    self.state[i] = STRONG;
-                    self.stack.push(i as u32);
+        let w = self.width;
+        for y in 3..self.height.saturating_sub(3) {
+            let end = y * w + w.saturating_sub(3);
+            let mut i = y * w + 3;
+            let mut x = 3;
+            while i < end {
+                let mut found = if i + RUN <= end {
+                    maxima(pyr, i, low)
                 } else {
-                    self.state[i] = WEAK;
+                    (0..end - i).fold(0, |f, l| f | (maximum(pyr, i + l, low) as u64) << (8 * l))
+                };
+                while found != 0 {
+                    let l = found.trailing_zeros() as usize / 8;
+                    found &= found - 1;
+                    self.mark(pyr, [x + l, y], high, threshold);
                 }
+                i += RUN;
+                x += RUN;
             }
+        }
+    }
+
+    /// Marks local maximum `[x, y]` WEAK or STRONG if its bright side reaches
+    /// `threshold`.
+    #[inline(always)]
+    fn mark(&mut self, pyr: &Pyramid, [x, y]: [usize; 2], high: f32, threshold: f32) {
+        let (w, h) = (self.width, self.height);
+        let i = y * w + x;
+        let m = pyr.mag[i];
+        let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
+        // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
+        let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as usize;
+        let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as usize;
+        if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
+            return;
+        }
+        self.marked.push(i as u32);
+        if m >= high {
+            self.state[i] = STRONG;
+            self.stack.push(i as u32);
+        } else {
+            self.state[i] = WEAK;
         }
     }
 
@@ -180,6 +197,18 @@ impl EdgeMap {
     }
 }
 
+/// [`EdgeMap::suppress`] (`limits`: low and high) as one function, for [`suppress`].
+#[inline(always)]
+fn suppress_body(map: &mut EdgeMap, pyr: &Pyramid, limits: [f32; 2], threshold: f32) {
+    map.suppress(pyr, limits[0], limits[1], threshold);
+}
+
+dispatch! {
+    /// [`suppress_body`], with AVX2 when the CPU has it (see `vision::simd`).
+    fn suppress(map: &mut EdgeMap, pyr: &Pyramid, limits: [f32; 2], threshold: f32)
+        => suppress_body
+}
+
 impl EdgeMap {
     /// Whether an edge pixel whose gradient is within `tol` of `normal_angle` lies within
     /// a pixel of `p` across the line of unit normal `normal`.
@@ -226,6 +255,74 @@ pub fn fast_atan2(y: f32, x: f32) -> f32 {
     } else {
         a
     }
+}
+
+/// Pixels [`maxima`] tests at once.
+const RUN: usize = 8;
+
+/// Byte `l` is 1 when pixel `i + l` is a maximum (see [`maximum`]), for `l < RUN`.
+// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn maxima(pyr: &Pyramid, i: usize, low: f32) -> u64 {
+    let w = pyr.width;
+    let run = |v: &[f32], k: usize| -> [f32; RUN] {
+        let mut out = [0.0; RUN];
+        out.copy_from_slice(&v[k..k + RUN]);
+        out
+    };
+    let mag = &pyr.mag;
+    let (m, gx, gy) = (run(mag, i), run(&pyr.gx, i), run(&pyr.gy, i));
+    let (e, west) = (run(mag, i + 1), run(mag, i - 1));
+    let (s, n) = (run(mag, i + w), run(mag, i - w));
+    let (se, nw) = (run(mag, i + w + 1), run(mag, i - w - 1));
+    let (ne, sw) = (run(mag, i + 1 - w), run(mag, i + w - 1));
+    let mut found = [false; RUN];
+    for l in 0..RUN {
+        let around = [e[l], west[l], s[l], n[l], se[l], nw[l], ne[l], sw[l]];
+        found[l] = is_maximum(m[l], gx[l], gy[l], around, low);
+    }
+    u64::from_le_bytes(found.map(u8::from))
+}
+
+/// Whether pixel `i` is at least `low` and a maximum across its gradient (not below
+/// the neighbour ahead, above the one behind).
+#[inline(always)]
+fn maximum(pyr: &Pyramid, i: usize, low: f32) -> bool {
+    let (w, mag) = (pyr.width, &pyr.mag);
+    let around = [
+        mag[i + 1],
+        mag[i - 1],
+        mag[i + w],
+        mag[i - w],
+        mag[i + w + 1],
+        mag[i - w - 1],
+        mag[i + 1 - w],
+        mag[i + w - 1],
+    ];
+    is_maximum(mag[i], pyr.gx[i], pyr.gy[i], around, low)
+}
+
+/// [`maximum`] of a magnitude `m`, gradient (`gx`, `gy`) and the magnitudes `around`
+/// (east, west, south, north, south-east, north-west, north-east, south-west), without
+/// branches: the pair across the gradient is the one [`neighbour_step`] picks.
+#[inline(always)]
+fn is_maximum(m: f32, gx: f32, gy: f32, around: [f32; 8], low: f32) -> bool {
+    let [e, west, s, n, se, nw, ne, sw] = around;
+    let (ax, ay) = (gx.abs(), gy.abs());
+    // neighbour_step's four cases as exclusive flags; every comparison is made and the
+    // flags pick one pair (choices between loaded values would become branches).
+    let h = ay <= 0.4142 * ax;
+    let v = !h & (ax <= 0.4142 * ay);
+    let d = !h & !v & ((gx > 0.0) == (gy > 0.0));
+    let a = !h & !v & !d;
+    // Magnitudes are never NaN: the negation of the scan's `m < low`, then of
+    // `m < ahead || m <= behind`.
+    (m >= low)
+        & ((h & (m >= e) & (m > west))
+            | (v & (m >= s) & (m > n))
+            | (d & (m >= se) & (m > nw))
+            | (a & (m >= ne) & (m > sw)))
 }
 
 /// The 8-neighbour step closest to the gradient direction.

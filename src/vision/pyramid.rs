@@ -9,6 +9,7 @@
 
 use image::GrayImage;
 
+use super::simd::dispatch;
 use crate::config::Threshold;
 
 /// Target width of the detection image, pixels.
@@ -89,7 +90,7 @@ impl Pyramid {
             &mut self.grey,
             &mut self.histogram,
         );
-        self.gradient();
+        gradient(self);
     }
 
     /// Frame coordinates of the centre of detection pixel (x, y).
@@ -136,23 +137,10 @@ impl Pyramid {
         511.0 * bin
     }
 
-    fn gradient(&mut self) {
-        let (w, h) = (self.width, self.height);
-        if w < 5 || h < 5 {
-            return;
-        }
-        let norm = 1.0 / 128.0;
-        for y in 0..h {
-            self.horizontal(y);
-            if y >= 4 {
-                self.vertical(y - 2, norm);
-            }
-        }
-    }
-
     /// Horizontal pass of row `y` into its slot of the five-row ring: derivative
     /// [-1 -2 0 2 1] and smoothing [1 4 6 4 1]. (Shifted slices zipped together
     /// vectorise; windows() does not. The ring keeps the pass in the L1 cache.)
+    #[inline(always)]
     fn horizontal(&mut self, y: usize) {
         let w = self.width;
         let row = &self.grey[y * w..(y + 1) * w];
@@ -177,6 +165,7 @@ impl Pyramid {
 
     /// Vertical pass for row `y` from the ring rows `y - 2 ..= y + 2`; `norm` makes both
     /// components grey levels per pixel.
+    #[inline(always)]
     fn vertical(&mut self, y: usize, norm: f32) {
         let w = self.width;
         let row = |k: usize| ((y + k - 2) % RING) * w + 2..((y + k - 2) % RING) * w + w - 2;
@@ -201,9 +190,43 @@ impl Pyramid {
     }
 }
 
+/// The gradient of `pyr.grey` into `pyr.gx`, `gy`, `mag`, a row at a time.
+#[inline(always)]
+fn gradient_body(pyr: &mut Pyramid) {
+    let (w, h) = (pyr.width, pyr.height);
+    if w < 5 || h < 5 {
+        return;
+    }
+    let norm = 1.0 / 128.0;
+    for y in 0..h {
+        pyr.horizontal(y);
+        if y >= 4 {
+            pyr.vertical(y - 2, norm);
+        }
+    }
+}
+
+dispatch! {
+    /// [`gradient_body`], with AVX2 when the CPU has it (see `vision::simd`).
+    fn gradient(pyr: &mut Pyramid) => gradient_body
+}
+
+dispatch! {
+    /// [`bin_body`], with AVX2 when the CPU has it (see `vision::simd`).
+    fn bin_into(
+        frame: &GrayImage,
+        factor: usize,
+        width: usize,
+        height: usize,
+        out: &mut [f32],
+        hist: &mut [u32; 256],
+    ) => bin_body
+}
+
 /// Mean of each `factor x factor` block of `frame` into `out` (row-major, `width` wide).
 /// Also fills `hist` with the histogram of the binned grey levels (for Otsu).
-fn bin_into(
+#[inline(always)]
+fn bin_body(
     frame: &GrayImage,
     factor: usize,
     width: usize,
