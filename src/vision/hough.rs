@@ -58,6 +58,8 @@ pub struct Hough {
     pixels: usize,
     /// Per edge, the indices of the points that voted for it (polarity-compatible).
     pub voters: [Vec<u32>; 3],
+    /// Scratch of `find_peaks`: which cells of a row are the maximum of their row.
+    row_max: Vec<u8>,
 }
 
 impl Hough {
@@ -166,36 +168,60 @@ impl Hough {
             // Votes never land in the first or last bin (rho_min has a margin).
             let (a, b) = (lo.max(2) - 1, (hi + 1).min(n_rho - 2));
             let src = &self.acc[row * n_rho..(row + 1) * n_rho];
-            for i in a..=b {
-                dst[i] = src[i - 1]
-                    .saturating_add(src[i].saturating_mul(2))
-                    .saturating_add(src[i + 1]);
+            // Shifted slices zipped together: the loop vectorises.
+            let (before, at, after) = (&src[a - 1..b], &src[a..=b], &src[a + 1..b + 2]);
+            for (((d, &l), &c), &r) in dst[a..=b].iter_mut().zip(before).zip(at).zip(after) {
+                *d = l.saturating_add(c.saturating_mul(2)).saturating_add(r);
             }
             self.smooth_span[row] = (a, b);
         }
         self.peaks.clear();
+        self.row_max.resize(n_rho, 0);
         for e in 0..3 {
             let first = self.peaks.len();
             for k in 0..n_psi {
-                let row = e * n_psi + k;
-                let (a, b) = self.smooth_span[row];
-                if a > b {
+                let (a, b) = self.smooth_span[e * n_psi + k];
+                let (lo, hi) = (a.max(2), b.min(n_rho - 3));
+                if lo > hi {
                     continue;
                 }
-                for i in a.max(2)..=b.min(n_rho - 3) {
-                    let v = self.smooth[row * n_rho + i];
-                    if v < MIN_VOTES || !self.is_local_max(e, k, i, v) {
-                        continue;
+                self.row_maxima(e * n_psi + k, lo, hi);
+                // Eight flags at a time: most cells are no maximum of their row.
+                for (c, flags) in self.row_max[..hi + 1 - lo].chunks(8).enumerate() {
+                    let mut word = [0u8; 8];
+                    word[..flags.len()].copy_from_slice(flags);
+                    let mut word = u64::from_le_bytes(word);
+                    while word != 0 {
+                        let i = lo + 8 * c + word.trailing_zeros() as usize / 8;
+                        word &= word - 1;
+                        let v = self.smooth[(e * n_psi + k) * n_rho + i];
+                        if self.is_local_max(e, k, i, v) {
+                            let peak = Peak {
+                                edge: e,
+                                psi: self.psi_of(k),
+                                rho: self.rho_min + i as f64,
+                                votes: v,
+                            };
+                            insert_top(&mut self.peaks, first, peak);
+                        }
                     }
-                    let peak = Peak {
-                        edge: e,
-                        psi: self.psi_of(k),
-                        rho: self.rho_min + i as f64,
-                        votes: v,
-                    };
-                    insert_top(&mut self.peaks, first, peak);
                 }
             }
+        }
+    }
+
+    /// Flags (`row_max[i - lo]` = 1) the cells `lo..=hi` of smoothed row `row` that have
+    /// [`MIN_VOTES`] and are the maximum of their five cells in the row (ties broken
+    /// as in [`Self::is_local_max`], which they must also pass).
+    fn row_maxima(&mut self, row: usize, lo: usize, hi: usize) {
+        let n_rho = self.n_rho;
+        let s = &self.smooth[row * n_rho..(row + 1) * n_rho];
+        let (m2, m1, c) = (&s[lo - 2..hi - 1], &s[lo - 1..hi], &s[lo..=hi]);
+        let (p1, p2) = (&s[lo + 1..hi + 2], &s[lo + 2..hi + 3]);
+        let cells = c.iter().zip(m2).zip(m1).zip(p1).zip(p2);
+        for (f, ((((&v, &m2), &m1), &p1), &p2)) in self.row_max.iter_mut().zip(cells) {
+            let max = (v >= MIN_VOTES) & (v > m2) & (v > m1) & (v >= p1) & (v >= p2);
+            *f = max as u8;
         }
     }
 

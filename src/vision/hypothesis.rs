@@ -187,11 +187,7 @@ impl Search {
             let mut cov = [Coverage::default(); 3];
             for (e, m) in members.iter().enumerate() {
                 if let Some(i) = m {
-                    cov[e] = cover(pose, turned[e], cands, &list[*i]);
-                    // Every line of a hypothesis must be part of the tip it proposes.
-                    if cov[e].visible < MIN_MEMBER_PX || cov[e].fraction() < MIN_MEMBER_FRACTION {
-                        return None;
-                    }
+                    cov[e] = member_cover(pose, turned[e], cands, &list[*i])?;
                 }
             }
             Some((cov, total_score(&cov)))
@@ -445,8 +441,15 @@ fn placed(pose: &Pose, turned: ([f64; 2], [f64; 2])) -> ([f64; 2], [f64; 2]) {
 }
 
 /// Coverage of an edge's predicted segment (`turned` by the pose's rotation, see
-/// [`turned_segment`]) by candidate `c`'s profile.
-fn cover(pose: &Pose, turned: ([f64; 2], [f64; 2]), cands: &Candidates, c: &Candidate) -> Coverage {
+/// [`turned_segment`]) by candidate `c`'s profile, if it is enough for `c` to be part
+/// of the tip (every line of a hypothesis must be). The overshoot past the corner is
+/// looked up only then: most placements the scale scan tries fail before.
+fn member_cover(
+    pose: &Pose,
+    turned: ([f64; 2], [f64; 2]),
+    cands: &Candidates,
+    c: &Candidate,
+) -> Option<Coverage> {
     let (tip, far) = placed(pose, turned);
     let length = norm(sub(far, tip));
     let t_tip = Candidates::t_of(c, tip);
@@ -454,13 +457,17 @@ fn cover(pose: &Pose, turned: ([f64; 2], [f64; 2]), cands: &Candidates, c: &Cand
     let dir = (t_far - t_tip).signum();
     let m = end_margin(length);
     let (supported, visible) = cands.support(c, t_tip + dir * m, t_far - dir * m);
-    let zone = 0.3 * length + 2.0;
-    let (overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
-    Coverage {
+    let mut cov = Coverage {
         supported,
         visible,
-        overshoot,
+        overshoot: 0.0,
+    };
+    if cov.visible < MIN_MEMBER_PX || cov.fraction() < MIN_MEMBER_FRACTION {
+        return None;
     }
+    let zone = 0.3 * length + 2.0;
+    (cov.overshoot, _) = cands.support(c, t_tip - dir * (m + zone), t_tip - dir * m);
+    Some(cov)
 }
 
 /// Coverage of edge `e`'s predicted segment measured directly on the edge map: used for
