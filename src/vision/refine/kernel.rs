@@ -135,8 +135,6 @@ struct EdgeSums {
 /// rejected stretches contribute nothing else. Samples go four at a time through
 /// lane arrays, which the compiler turns into vector arithmetic for the 44 products per
 /// sample of the normal equations.
-// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
-#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 fn accumulate_edge_body(
     samples: &[Sample],
@@ -156,19 +154,7 @@ fn accumulate_edge_body(
     for first in (0..samples.len()).step_by(LANES * step) {
         batch.fill(samples, first, step);
         let m = batch.model(table, f, p, inv_blur, corner_t);
-        // The sums run sample after sample, in the samples' order.
-        let mut all_ok = batch.len == LANES;
-        for l in 0..batch.len {
-            let c = batch.chunk[l];
-            chunk_sq[c] += m.r2[l];
-            chunk_n[c] += 1;
-            if chunk_ok[c] {
-                sq += m.wr2[l];
-                wsum += m.weight[l];
-            } else {
-                all_ok = false;
-            }
-        }
+        let all_ok = batch.sums(&m, chunk_ok, chunk_sq, chunk_n, &mut sq, &mut wsum);
         if all_ok && acc.lane == 0 {
             // The common case: the batch's lanes are the accumulator's.
             acc.add(&m.jac, &m.weight, &m.r);
@@ -365,6 +351,51 @@ impl Batch {
             self.set(self.len, s);
             self.len += 1;
         }
+    }
+
+    /// Adds the batch's squared residuals `m.r2` to their stretches' sums and, for the
+    /// samples of stretches that count, `m.wr2` to `sq` and the weights to `wsum`,
+    /// sample after sample in the samples' order; returns whether all four count.
+    #[inline(always)]
+    fn sums(
+        &self,
+        m: &ModelLanes,
+        chunk_ok: &[bool],
+        chunk_sq: &mut [f64],
+        chunk_n: &mut [u32],
+        sq: &mut f64,
+        wsum: &mut f64,
+    ) -> bool {
+        let c = self.chunk[0];
+        if self.len == LANES && self.chunk == [c; LANES] {
+            // The common case: one stretch (its sum kept in a register).
+            let mut s = chunk_sq[c];
+            for r2 in m.r2 {
+                s += r2;
+            }
+            chunk_sq[c] = s;
+            chunk_n[c] += LANES as u32;
+            if chunk_ok[c] {
+                for l in 0..LANES {
+                    *sq += m.wr2[l];
+                    *wsum += m.weight[l];
+                }
+            }
+            return chunk_ok[c];
+        }
+        let mut all_ok = self.len == LANES;
+        for l in 0..self.len {
+            let c = self.chunk[l];
+            chunk_sq[c] += m.r2[l];
+            chunk_n[c] += 1;
+            if chunk_ok[c] {
+                *sq += m.wr2[l];
+                *wsum += m.weight[l];
+            } else {
+                all_ok = false;
+            }
+        }
+        all_ok
     }
 
     #[inline(always)]
