@@ -16,6 +16,7 @@
 
 use super::edges::EdgePoint;
 use super::geometry::wrap_pi;
+use super::simd::dispatch;
 
 /// Width of a psi bin, radians.
 pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
@@ -111,6 +112,12 @@ impl Hough {
     /// Votes every edge point into the accumulators of the edges its polarity allows.
     /// `noise` is the gradient noise; weaker pixels get a wider direction tolerance.
     pub fn vote(&mut self, points: &[EdgePoint], noise: f32) {
+        vote(self, points, noise);
+    }
+
+    /// [`Self::vote`]'s body (see [`vote`]).
+    #[inline(always)]
+    fn vote_body(&mut self, points: &[EdgePoint], noise: f32) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         for (row, span) in self.votes_span.iter_mut().enumerate() {
             if span.0 <= span.1 {
@@ -153,6 +160,12 @@ impl Hough {
 
     /// Fills `self.peaks` with up to [`PEAKS_PER_EDGE`] best local maxima per edge.
     pub fn find_peaks(&mut self) {
+        find_peaks(self);
+    }
+
+    /// [`Self::find_peaks`]'s body (see [`find_peaks`]).
+    #[inline(always)]
+    fn find_peaks_body(&mut self) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         for row in 0..3 * n_psi {
             let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
@@ -213,6 +226,7 @@ impl Hough {
     /// Flags (`row_max[i - lo]` = 1) the cells `lo..=hi` of smoothed row `row` that have
     /// [`MIN_VOTES`] and are the maximum of their five cells in the row (ties broken
     /// as in [`Self::is_local_max`], which they must also pass).
+    #[inline(always)]
     fn row_maxima(&mut self, row: usize, lo: usize, hi: usize) {
         let n_rho = self.n_rho;
         let s = &self.smooth[row * n_rho..(row + 1) * n_rho];
@@ -227,6 +241,7 @@ impl Hough {
 
     /// Whether cell (e, k, i) with smoothed value v is the maximum of its 5x5
     /// neighbourhood (ties broken towards the lower index).
+    #[inline(always)]
     fn is_local_max(&self, e: usize, k: usize, i: usize, v: u16) -> bool {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         for kk in k.saturating_sub(2)..(k + 3).min(n_psi) {
@@ -241,6 +256,17 @@ impl Hough {
         }
         true
     }
+}
+
+dispatch! {
+    /// [`Hough::vote_body`], with AVX2 when the CPU has it (see `vision::simd`; its
+    /// rounding instructions also replace the library calls of `ceil` and `floor`).
+    fn vote(hough: &mut Hough, points: &[EdgePoint], noise: f32) => Hough::vote_body
+}
+
+dispatch! {
+    /// [`Hough::find_peaks_body`], with AVX2 when the CPU has it (see `vision::simd`).
+    fn find_peaks(hough: &mut Hough) => Hough::find_peaks_body
 }
 
 /// Inserts `peak` into the descending list `peaks[first..]`, keeping at most

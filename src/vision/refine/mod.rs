@@ -441,7 +441,7 @@ impl Refiner {
                 contrast: x[P_PHOTO + PHOTO * e + 2],
                 level: x[P_PHOTO + PHOTO * e],
                 noise: ne.noise[e],
-                samples: self.samples.iter().filter(|s| s.edge as usize == e).count(),
+                samples: self.ranges[e].len(),
                 turn,
             });
         }
