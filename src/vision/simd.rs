@@ -30,6 +30,7 @@ fn cpu_has_avx2() -> bool {
 
 /// Whether the hot loops run their AVX2 copies (the CPU has it, and it is not off).
 #[inline]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub fn avx2() -> bool {
     match CHOICE.load(Ordering::Relaxed) {
         UNKNOWN => {
