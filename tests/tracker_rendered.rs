@@ -62,19 +62,19 @@ fn suite_of_600_rendered_frames() {
     assert!(sc.positives >= 550, "{why}");
     assert!(sc.detect_rate >= 0.998, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.013, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.092, "{why}");
-    // Was 0.26, set before the renderer matched the public samples (harsher clutter and
-    // jitter): main then measured 0.34. The worst frames are harsh ones whose error is
-    // 2-3 times the fit's own standard error (Estimate::angle_sigma_deg, 0.1-0.16 deg
-    // there): noise, not a failure (docs/tracker.md, Accuracy). Measured 0.327.
-    assert!(sc.angle_err_max_deg <= 0.34, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.012, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.086, "{why}");
+    // The worst frames are harsh ones whose error is 2-3 times the fit's own standard
+    // error (Estimate::angle_sigma_deg, 0.07-0.1 deg there): noise, not a failure
+    // (docs/tracker.md, Accuracy). Measured 0.327, and 0.265 since the prior on the
+    // probe side's shading.
+    assert!(sc.angle_err_max_deg <= 0.28, "{why}");
     assert!(sc.tip_err_median_px <= 0.085, "{why}");
     for (style, median, p95) in [
-        ("clean", 0.005, 0.023),
+        ("clean", 0.0045, 0.02),
         ("clutter", 0.0105, 0.048),
         ("noisy", 0.017, 0.07),
-        ("harsh", 0.041, 0.14),
+        ("harsh", 0.038, 0.125),
     ] {
         let (ts, es) = of_style(&t, &e, style);
         let sc = score(&ts, &es);
@@ -197,10 +197,10 @@ fn coherence_is_a_shortcut_never_a_dependency() {
         assert_eq!(sc.detect_rate, 1.0, "{why}");
         assert_eq!(sc.false_detections, 0, "{why}");
         // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
-        // p95 was 0.18, set before the renderer matched the public samples; main then
-        // measured 0.214. Measured 0.213 and max 0.302.
+        // Measured p95 0.213 and max 0.302; since the prior on the probe side's
+        // shading 0.176 and 0.344 (frames above 0.2 deg: 15 -> 4, one frame worse).
         assert!(
-            sc.angle_err_p95_deg <= 0.22 && sc.angle_err_max_deg <= 0.31,
+            sc.angle_err_p95_deg <= 0.185 && sc.angle_err_max_deg <= 0.35,
             "{why}"
         );
     }

@@ -20,9 +20,9 @@ fn mixed_sample_in_random_order() {
     let why = format!("{sc:?}\n{}", table(&s.truth, &est));
     assert_eq!(sc.detect_rate, 1.0, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.046, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.14, "{why}");
-    assert!(sc.angle_err_max_deg <= 0.29, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.044, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
+    assert!(sc.angle_err_max_deg <= 0.26, "{why}");
     assert!(sc.tip_err_median_px <= 0.75, "{why}");
 }
 
@@ -34,9 +34,9 @@ fn sequence_sample_with_and_without_coherence() {
         let sc = score(&s.truth, &est);
         let why = format!("coherence {coherence}: {sc:?}\n{}", table(&s.truth, &est));
         assert_eq!(sc.detect_rate, 1.0, "{why}");
-        assert!(sc.angle_err_median_deg <= 0.028, "{why}");
+        assert!(sc.angle_err_median_deg <= 0.022, "{why}");
         assert!(sc.angle_err_p95_deg <= 0.066, "{why}");
-        assert!(sc.angle_err_max_deg <= 0.1, "{why}");
+        assert!(sc.angle_err_max_deg <= 0.09, "{why}");
         assert!(sc.tip_err_median_px <= 0.6, "{why}");
     }
 }
