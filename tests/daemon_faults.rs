@@ -453,9 +453,10 @@ fn normal_stop_leaves_outputs_at_zero_and_forces_off() {
     );
     assert!(stats.frames.received > 3 && stats.frames.tracked > 3);
     // A fast tracker keeps up; the ten daemons of this file share two cores at normal
-    // priority, so a rare frame may still be replaced before the tracker wakes.
+    // priority, so a rare frame may still be replaced before the tracker wakes (one
+    // drop in 7 frames failed a clean CI run): one, plus a tenth of the rest.
     assert!(
-        stats.frames.dropped * 10 <= stats.frames.received,
+        stats.frames.dropped <= 1 + stats.frames.received / 10,
         "a fast tracker keeps up: {stats:?}"
     );
     assert!(
