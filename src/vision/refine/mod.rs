@@ -16,8 +16,8 @@
 //! along the elastica: its offset from the free-end tangent grows as the cube of the
 //! distance `w` behind the block (the bending moment grows linearly from there), so a
 //! cubic term, with a prior from the exact elastica (`bands::bend_prior`), lets a long
-//! stretch of beam pin the tangent down instead of biasing it. Stretches whose residuals stand out (a particle on the edge)
-//! are left out.
+//! stretch of beam pin the tangent down instead of biasing it. Stretches whose
+//! residuals stand out (a particle on the edge) are left out.
 //!
 //! `kernel` is the inner loop, `gauss` the tabulated normal CDF, `solve` the small
 //! dense algebra.
@@ -284,13 +284,11 @@ impl Refiner {
             // Expectations as observations, weighted like the pixels (whose sums the
             // normal equations hold): the physics' bend, and the slow shading.
             if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
-                let n2 = ne.noise[RED_BAND].min(1e6).powi(2);
-                let weight = n2 / (b.bend_sigma * b.bend_sigma * step as f64);
+                let weight = pixel_weight(&ne, RED_BAND, b.bend_sigma, step);
                 prior(&mut ne, &x, &[P_BEND], b.bend0, weight);
             }
             for e in (0..3).filter(|&e| frames[e].is_some()) {
-                let n2 = ne.noise[e].min(1e6).powi(2);
-                let weight = n2 / (PROBE_SLOPE_SIGMA * PROBE_SLOPE_SIGMA * step as f64);
+                let weight = pixel_weight(&ne, e, PROBE_SLOPE_SIGMA, step);
                 // The probe side's slope: level slope plus contrast slope.
                 let p0 = P_PHOTO + PHOTO * e;
                 prior(&mut ne, &x, &[p0 + 1, p0 + 3], 0.0, weight);
@@ -471,6 +469,13 @@ impl Refiner {
             bend: x[P_BEND],
         }
     }
+}
+
+/// Weight of an observation with standard deviation `sigma` in the units of edge `e`'s
+/// pixel sums (their noise squared; halved when every other pixel is summed).
+fn pixel_weight(ne: &Normal, e: usize, sigma: f64, step: usize) -> f64 {
+    let n2 = ne.noise[e].min(1e6).powi(2);
+    n2 / (sigma * sigma * step as f64)
 }
 
 /// Adds the observation "the sum of the parameters `ks` is `mean`" with `weight` (in
