@@ -184,6 +184,22 @@ impl Candidates {
         (sup * c.bin, (b - a) as f64 * c.bin)
     }
 
+    /// Where `c`'s profile can contribute to [`Candidates::support`], for bounding it
+    /// without the look-ups: the bin width, the `t` range the profile spans, and the
+    /// range its supported bins span (`None` without support).
+    pub fn reach(&self, c: &Candidate) -> (f64, [f64; 2], Option<[f64; 2]>) {
+        let prefix = &self.prefix[c.slot * (PROFILE_BINS + 1)..][..c.bins + 1];
+        let t = |k: usize| c.t_first + k as f64 * c.bin;
+        let total = prefix[c.bins];
+        // Bin k is supported when prefix[k + 1] > prefix[k].
+        let supported = (total > 0).then(|| {
+            let first = prefix.partition_point(|&p| p == 0) - 1;
+            let last = prefix.partition_point(|&p| p < total) - 1;
+            [t(first), t(last)]
+        });
+        (c.bin, [t(0), t(c.bins)], supported)
+    }
+
     /// `t` of frame point `p` on candidate `c`'s line.
     pub fn t_of(c: &Candidate, p: [f64; 2]) -> f64 {
         dot(along(c.normal), sub(p, c.centroid))

@@ -176,12 +176,19 @@ impl Search {
         }
         let mut members = [None; 3];
         let mut turned = [([0.0; 2], [0.0; 2]); 3];
+        let mut reach = [None; 3];
         for &i in idx {
-            members[list[i].edge] = Some(i);
-            turned[list[i].edge] = turned_segment(t, psi, list[i].edge);
+            let e = list[i].edge;
+            members[e] = Some(i);
+            turned[e] = turned_segment(t, psi, e);
+            reach[e] = Reach::new(cands, &list[i], turned[e]);
+            if reach[e].is_none() {
+                // No supported bin: member_cover never accepts it.
+                return;
+            }
         }
         let partial = |pose: &Pose| -> Option<([Coverage; 3], f64)> {
-            if !plausible(t, pose, size) {
+            if !plausible(t, pose, size) || reach.iter().flatten().any(|r| !r.may_cover(pose)) {
                 return None;
             }
             let mut cov = [Coverage::default(); 3];
@@ -440,6 +447,64 @@ fn placed(pose: &Pose, turned: ([f64; 2], [f64; 2])) -> ([f64; 2], [f64; 2]) {
     (place(turned.0), place(turned.1))
 }
 
+/// A quick necessary test for [`member_cover`]: bounds of the coverage it would find,
+/// from where the candidate's profile and its supported bins lie along its line. The
+/// scale scan tries ~190 placements per pair and most fail here, for a few
+/// multiply-adds instead of a square root, two divisions and the profile look-ups.
+#[derive(Debug, Clone, Copy)]
+struct Reach {
+    /// `t` along the candidate's line is `dot(dir, p) + base`.
+    dir: [f64; 2],
+    base: f64,
+    /// `t` of the turned segment's ends per unit scale, and its length per unit scale.
+    t_tip: f64,
+    t_far: f64,
+    length: f64,
+    bin: f64,
+    /// The profile's extent in `t`, and its supported bins' (half a bin later: see
+    /// [`Reach::may_cover`]).
+    profile: [f64; 2],
+    supported: [f64; 2],
+}
+
+impl Reach {
+    fn new(cands: &Candidates, c: &Candidate, turned: ([f64; 2], [f64; 2])) -> Option<Self> {
+        let dir = super::geometry::along(c.normal);
+        let (bin, profile, supported) = cands.reach(c);
+        let [first, last] = supported?;
+        Some(Reach {
+            dir,
+            base: -dot(dir, c.centroid),
+            t_tip: dot(dir, turned.0),
+            t_far: dot(dir, turned.1),
+            length: norm(sub(turned.1, turned.0)),
+            bin,
+            profile,
+            supported: [first + 0.5 * bin, last + 0.5 * bin],
+        })
+    }
+
+    /// False only if [`member_cover`] would find too little. `support` sums the bins
+    /// `a..b` nearest the trimmed segment's ends: with `o(R)` the overlap of the
+    /// segment with range R, its visible length is at least `o(profile) - bin` and at
+    /// most `o(profile) + bin`, and its supported length at most `o(supported) + bin`.
+    fn may_cover(&self, pose: &Pose) -> bool {
+        let at = dot(self.dir, pose.apex) + self.base;
+        let (tip, far) = (at + pose.scale * self.t_tip, at + pose.scale * self.t_far);
+        let m = end_margin(pose.scale * self.length);
+        let dir = (far - tip).signum();
+        let (a, b) = (tip + dir * m, far - dir * m);
+        let (lo, hi) = (a.min(b), a.max(b));
+        let overlap = |r: [f64; 2]| hi.min(r[1]) - lo.max(r[0]);
+        let visible = overlap(self.profile);
+        let supported = (overlap(self.supported) + self.bin).max(0.0);
+        // The slack absorbs rounding between these sums and member_cover's.
+        const SLACK: f64 = 1e-6;
+        visible + self.bin + SLACK >= MIN_MEMBER_PX
+            && supported + SLACK >= MIN_MEMBER_FRACTION * (visible - self.bin)
+    }
+}
+
 /// Coverage of an edge's predicted segment (`turned` by the pose's rotation, see
 /// [`turned_segment`]) by candidate `c`'s profile, if it is enough for `c` to be part
 /// of the tip (every line of a hypothesis must be). The overshoot past the corner is
@@ -498,4 +563,81 @@ fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
         s += 1.0;
     }
     cov
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::edges::EdgePoint;
+    use crate::vision::hough::Peak;
+
+    /// A candidate on a 3-deg line with support on two pieces (t 0-25 and 45-70 px).
+    fn gapped_candidate() -> Candidates {
+        let a = 3f64.to_radians();
+        let normal_angle = a + std::f64::consts::FRAC_PI_2;
+        let pts: Vec<EdgePoint> = (0..70)
+            .filter(|i| !(25..45).contains(i))
+            .map(|i| EdgePoint {
+                x: (120.0 + i as f64 * a.cos()) as f32,
+                y: (80.0 + i as f64 * a.sin()) as f32,
+                angle: normal_angle as f32,
+                ux: normal_angle.cos() as f32,
+                uy: normal_angle.sin() as f32,
+                mag: 40.0,
+            })
+            .collect();
+        let peak = Peak {
+            edge: 0,
+            psi: 3f64.to_radians(),
+            rho: 80.0 * a.cos() - 120.0 * a.sin(),
+            votes: 50,
+        };
+        let mut c = Candidates::default();
+        let all: Vec<u32> = (0..pts.len() as u32).collect();
+        c.build(
+            &[peak],
+            &pts,
+            &[all.clone(), all.clone(), all],
+            [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
+            [320, 240],
+        );
+        c
+    }
+
+    #[test]
+    fn reach_rejects_only_placements_member_cover_rejects() {
+        let cands = gapped_candidate();
+        let c = cands.list[0];
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut uniform = |lo: f64, hi: f64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        let (mut rejected, mut accepted) = (0, 0);
+        for _ in 0..20_000 {
+            // Segments near the line, of every length and direction along it.
+            let tip = [uniform(-30.0, 30.0), uniform(-2.0, 2.0)];
+            let far = [tip[0] + uniform(-60.0, 60.0), tip[1] + uniform(-4.0, 4.0)];
+            let pose = Pose {
+                psi: 0.0,
+                scale: uniform(0.1, 3.0),
+                apex: [uniform(80.0, 220.0), uniform(70.0, 95.0)],
+            };
+            let reach = Reach::new(&cands, &c, (tip, far)).unwrap();
+            let cover = member_cover(&pose, (tip, far), &cands, &c);
+            if reach.may_cover(&pose) {
+                accepted += cover.is_some() as usize;
+            } else {
+                assert!(cover.is_none(), "{pose:?} {tip:?} {far:?} {cover:?}");
+                rejected += 1;
+            }
+        }
+        // Both outcomes occur, so the test says something.
+        assert!(
+            rejected > 2_000 && accepted > 2_000,
+            "{rejected} {accepted}"
+        );
+    }
 }
