@@ -1,6 +1,7 @@
 //! The results CSV of a replay: one row per frame. The first six columns are fixed
 //! (`frame, detected, angle_deg, force_nN, tip_x, tip_y`, empty when not detected), the
-//! rest describe the estimate: confidence, scale, the edges' support, the SEM's scale
+//! rest describe the estimate: confidence, the angle's standard error from the frame's
+//! noise (`angle_sigma_deg`), scale, the edges' support, the SEM's scale
 //! from the frame's metadata (`px_per_um`, `magnification`, the apex in micrometres:
 //! empty without metadata), the found edge segments (`red_x0,red_y0,red_x1,red_y1`, ...
 //! in frame pixels, for pictures) and `miss`. Without timing the file is a pure function
@@ -15,7 +16,8 @@ use crate::vision::{Edge, EdgeFit, Estimate, Miss};
 /// The header; `timing` adds `processing_ms` (which varies from run to run).
 pub fn header(timing: bool) -> String {
     let mut h = String::from(
-        "frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence,scale,force_saturated,\
+        "frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence,angle_sigma_deg,scale,\
+         force_saturated,\
          red_support,blue_support,green_support,px_per_um,magnification,tip_x_um,tip_y_um,\
          red_x0,red_y0,red_x1,red_y1,blue_x0,blue_y0,blue_x1,blue_y1,\
          green_x0,green_y0,green_x1,green_y1,miss",
@@ -51,7 +53,7 @@ pub fn write_row(
     let support = |edge: Edge| e.edges[edge.index()].map_or(0, |f| f.support);
     write!(
         out,
-        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
+        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{}",
         csv_field(frame),
         u8::from(e.detected),
         fixed(e.angle_deg, 6),
@@ -59,6 +61,7 @@ pub fn write_row(
         fixed(e.apex_px.map(|a| a[0]), 3),
         fixed(e.apex_px.map(|a| a[1]), 3),
         e.confidence,
+        fixed(e.angle_sigma_deg, 6),
         e.scale.map_or(String::new(), |s| format!("{s:.5}")),
         u8::from(e.force_saturated),
         support(Edge::Red),
@@ -111,7 +114,7 @@ fn edge_columns(edges: &[Option<EdgeFit>; 3]) -> String {
 pub fn write_unreadable(out: &mut impl Write, frame: &str, timing: bool) -> io::Result<()> {
     write!(
         out,
-        "{},0,,,,,0.0000,,0,0,0,0{}unreadable",
+        "{},0,,,,,0.0000,,,0,0,0,0{}unreadable",
         csv_field(frame),
         // the 4 scale and 12 edge columns, empty
         ",".repeat(17)
@@ -273,7 +276,7 @@ mod tests {
         assert_eq!(
             String::from_utf8(out).unwrap(),
             format!(
-                "f.png,0,,,,,0.2000,,0,0,0,0,10.00000,2000.0,,,{}inconsistent\n",
+                "f.png,0,,,,,0.2000,,,0,0,0,0,10.00000,2000.0,,,{}inconsistent\n",
                 ",".repeat(12)
             )
         );
@@ -282,7 +285,7 @@ mod tests {
         let line = String::from_utf8(out).unwrap();
         assert!(line.ends_with(",unreadable,\n"), "{line}");
         let columns = header(true).split(',').count();
-        assert_eq!(columns, 30);
+        assert_eq!(columns, 31);
         assert_eq!(split_csv_line(line.trim_end()).len(), columns);
         let rows = parse_results(&format!("{}\n{line}", header(true))).unwrap();
         assert_eq!(rows[0].frame, "a,b.png");
@@ -304,7 +307,7 @@ mod tests {
             force_nn: Some(-700.25),
             force_saturated: false,
             apex_px: Some([320.5, 240.25]),
-            angle_sigma_deg: None,
+            angle_sigma_deg: Some(0.0125),
             edges: [
                 Some(fit([300.0, 200.0], [100.0, 150.0])),
                 None,
@@ -325,6 +328,7 @@ mod tests {
         let text = String::from_utf8(out).unwrap();
         let row = text.lines().nth(1).unwrap();
         assert!(row.contains(",20.00000,4000.0,16.0250,12.0125,"), "{row}");
+        assert!(row.contains(",0.9000,0.012500,1.00000,0,40,0,40,"), "{row}");
         let r = &parse_results(&text).unwrap()[0];
         assert!(r.detected);
         assert_eq!(r.angle_deg, Some(-2.5));
