@@ -10,6 +10,7 @@ use crate::config::{CalibrationConfig, Threshold, TrackerConfig, DEFAULT_WINDOW_
 use crate::session::frames::load_gray;
 use crate::vision::{draw_calibration, Calibration, Edge};
 
+/// Refine clicked tip edges on a reference frame; print the calibration block.
 #[derive(Debug, Args)]
 #[command(
     long_about = "Calibrates the tracker on a reference frame: the undeformed probe, \

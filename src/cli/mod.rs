@@ -29,18 +29,16 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// No doc comments here: each subcommand's one-line summary is the doc comment of its
+/// arguments struct, beside its `long_about`. A doc comment on a variant would replace
+/// both, and `nanoforce replay --help` would lose its description of the CSV columns.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Run the real-time teleoperation daemon (default: the built-in simulated lab).
     Run(run::RunArgs),
-    /// Track the tip in a recorded session's frames and write the results CSV.
     Replay(replay::ReplayArgs),
-    /// Refine clicked tip edges on a reference frame; print the calibration block.
     Calibrate(calibrate::CalibrateArgs),
-    /// Write an HTML report (plots, thumbnails, accuracy) about a replayed or recorded session.
     Report(report::ReportArgs),
     Model(model::ModelArgs),
-    /// Open each configured device once and list what this machine offers.
     ProbeDevices(probe_devices::ProbeArgs),
 }
 
@@ -66,4 +64,31 @@ fn init_logging() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn every_subcommand_has_a_summary_and_its_long_help() {
+        let cli = Cli::command();
+        for sub in cli.get_subcommands() {
+            let name = sub.get_name();
+            let about = sub.get_about().map(|a| a.to_string()).unwrap_or_default();
+            let long = sub
+                .get_long_about()
+                .map(|a| a.to_string())
+                .unwrap_or_default();
+            assert!(!about.is_empty(), "{name}: no summary");
+            assert!(
+                long.len() > about.len() + 40,
+                "{name}: no long help ({long:?})"
+            );
+        }
+        let replay = cli.find_subcommand("replay").unwrap();
+        let long = replay.get_long_about().unwrap().to_string();
+        assert!(long.contains("CSV columns") && long.contains("angle_sigma_deg"));
+    }
 }

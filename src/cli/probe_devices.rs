@@ -10,6 +10,7 @@ use clap::Args;
 use crate::config::Config;
 use crate::hw::{probe, Clock};
 
+/// Open each configured device once and list what this machine offers.
 #[derive(Debug, Args)]
 #[command(
     long_about = "Checks the lab's devices before a run.\n\n\

@@ -17,6 +17,7 @@ use crate::session::metadata::{read_sem_metadata, SemMetadata};
 use crate::session::results;
 use crate::vision::{draw_overlay, Tracker};
 
+/// Track the tip in a recorded session's frames and write the results CSV.
 #[derive(Debug, Args)]
 #[command(
     long_about = "Tracks the cantilever tip in every frame of a recorded session and \

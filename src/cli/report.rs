@@ -7,6 +7,7 @@ use clap::Args;
 
 use crate::report::{write_report, ReportOptions};
 
+/// Write an HTML report (plots, thumbnails, accuracy) about a replayed or recorded session.
 #[derive(Debug, Args)]
 #[command(
     long_about = "Writes a report about a session: one HTML page that opens in any browser \

@@ -15,6 +15,7 @@ use crate::hw::Clock;
 /// The built-in simulated lab.
 pub const SIM_CONFIG: &str = include_str!("../../config/sim.toml");
 
+/// Run the real-time teleoperation daemon (default: the built-in simulated lab).
 #[derive(Debug, Args)]
 #[command(
     long_about = "Runs the real-time teleoperation daemon.\n\n\
