@@ -284,6 +284,39 @@ fn fit_line(points: &Voters, normal: [f64; 2], rho: f64, band: f64) -> Option<Fi
     })
 }
 
+/// Test input: the candidates of edge 0 polished from `peak` on edge pixels at the
+/// steps `at` (1 px apart) along a line from `origin` at `angle` (radians, bright side
+/// counter-clockwise of the direction), in a 320x240 detection image.
+#[cfg(test)]
+pub(super) fn line_candidates(
+    origin: [f64; 2],
+    angle: f64,
+    at: impl Iterator<Item = usize>,
+    peak: Peak,
+) -> Candidates {
+    let normal_angle = angle + std::f64::consts::FRAC_PI_2;
+    let pts: Vec<EdgePoint> = at
+        .map(|i| EdgePoint {
+            x: (origin[0] + i as f64 * angle.cos()) as f32,
+            y: (origin[1] + i as f64 * angle.sin()) as f32,
+            angle: normal_angle as f32,
+            ux: normal_angle.cos() as f32,
+            uy: normal_angle.sin() as f32,
+            mag: 40.0,
+        })
+        .collect();
+    let mut c = Candidates::default();
+    let all: Vec<u32> = (0..pts.len() as u32).collect();
+    c.build(
+        &[peak],
+        &pts,
+        &[all.clone(), all.clone(), all],
+        [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
+        [320, 240],
+    );
+    c
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -292,32 +325,13 @@ mod tests {
     fn polishing_recovers_a_line_and_its_extent() {
         // A 60-px segment at 3 deg below horizontal, bright below.
         let a = 3f64.to_radians();
-        let normal_angle = a + std::f64::consts::FRAC_PI_2;
-        let pts: Vec<EdgePoint> = (0..60)
-            .map(|i| EdgePoint {
-                x: (50.0 + i as f64 * a.cos()) as f32,
-                y: (80.0 + i as f64 * a.sin()) as f32,
-                angle: normal_angle as f32,
-                ux: normal_angle.cos() as f32,
-                uy: normal_angle.sin() as f32,
-                mag: 40.0,
-            })
-            .collect();
         let peak = Peak {
             edge: 0,
             psi: 2f64.to_radians(),
             rho: 78.0,
             votes: 60,
         };
-        let mut c = Candidates::default();
-        let all: Vec<u32> = (0..pts.len() as u32).collect();
-        c.build(
-            &[peak],
-            &pts,
-            &[all.clone(), all.clone(), all],
-            [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
-            [320, 240],
-        );
+        let c = line_candidates([50.0, 80.0], a, 0..60, peak);
         let cand = c.list[0];
         assert!(
             (cand.psi.to_degrees() - 3.0).abs() < 0.05,

@@ -568,40 +568,24 @@ fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::edges::EdgePoint;
+    use crate::vision::candidates::line_candidates;
     use crate::vision::hough::Peak;
 
     /// A candidate on a 3-deg line with support on two pieces (t 0-25 and 45-70 px).
     fn gapped_candidate() -> Candidates {
         let a = 3f64.to_radians();
-        let normal_angle = a + std::f64::consts::FRAC_PI_2;
-        let pts: Vec<EdgePoint> = (0..70)
-            .filter(|i| !(25..45).contains(i))
-            .map(|i| EdgePoint {
-                x: (120.0 + i as f64 * a.cos()) as f32,
-                y: (80.0 + i as f64 * a.sin()) as f32,
-                angle: normal_angle as f32,
-                ux: normal_angle.cos() as f32,
-                uy: normal_angle.sin() as f32,
-                mag: 40.0,
-            })
-            .collect();
         let peak = Peak {
             edge: 0,
-            psi: 3f64.to_radians(),
+            psi: a,
             rho: 80.0 * a.cos() - 120.0 * a.sin(),
             votes: 50,
         };
-        let mut c = Candidates::default();
-        let all: Vec<u32> = (0..pts.len() as u32).collect();
-        c.build(
-            &[peak],
-            &pts,
-            &[all.clone(), all.clone(), all],
-            [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
-            [320, 240],
-        );
-        c
+        line_candidates(
+            [120.0, 80.0],
+            a,
+            (0..70).filter(|i| !(25..45).contains(i)),
+            peak,
+        )
     }
 
     #[test]
