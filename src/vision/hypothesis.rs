@@ -13,7 +13,7 @@
 
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
-use super::geometry::{add, clip_to_rect, dot, norm, rotate, scale, sub, wrap_pi};
+use super::geometry::{add, along, clip_to_rect, dot, norm, rotate, scale, sub, wrap_pi};
 use super::template::{Pose, Template, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
@@ -469,7 +469,7 @@ struct Reach {
 
 impl Reach {
     fn new(cands: &Candidates, c: &Candidate, turned: ([f64; 2], [f64; 2])) -> Option<Self> {
-        let dir = super::geometry::along(c.normal);
+        let dir = along(c.normal);
         let (bin, profile, supported) = cands.reach(c);
         let [first, last] = supported?;
         Some(Reach {
