@@ -30,6 +30,10 @@ const MAX_GAP_PX: f64 = 3.0;
 const FOLLOW_ANGLE_RAD: f64 = 0.3;
 /// The reference beam is straight: the tracker's bend prior at rest.
 const REST_BEND_SIGMA_PX: f64 = 0.03;
+/// Faces whose bases lie this close (as a share of the farther one's distance) to
+/// equally far from the apex's foot along the beam do not tell which way its free end
+/// is (see `free_end`).
+const SYMMETRIC_BASES: f64 = 0.2;
 /// Initial blur guess for the grey-level fit, pixels.
 pub const BLUR0_PX: f64 = 1.2;
 
@@ -178,6 +182,28 @@ fn fit_edges(
         contrast[e] = r.contrast;
     }
     Ok((lines, contrast, fit.blur))
+}
+
+/// Which of the beam edge's two ends (positions `taus` along it, from the apex's foot)
+/// is the free end, given where the two faces' bases lie along it (`bases`). The front
+/// face is the steeper, shorter one, so its base lies nearer the apex's foot and on the
+/// free end's side: the free end is the end furthest from the far base towards the near
+/// one. That needs no labels, so a swapped blue and green is still caught afterwards.
+/// Only when the two bases are about as far from the foot (within
+/// [`SYMMETRIC_BASES`]) does the end nearer the apex's foot decide; that alone fails
+/// when a large pyramid hangs from a beam that leaves the frame close behind the apex,
+/// so that the border cuts the beam nearer the foot than its free end is.
+fn free_end(taus: [f64; 2], bases: [f64; 2]) -> usize {
+    let (near, far) = if bases[0].abs() <= bases[1].abs() {
+        (bases[0], bases[1])
+    } else {
+        (bases[1], bases[0])
+    };
+    if far.abs() - near.abs() < SYMMETRIC_BASES * far.abs() {
+        return usize::from(taus[1].abs() < taus[0].abs());
+    }
+    let towards_free = (near - far).signum();
+    usize::from(towards_free * taus[1] > towards_free * taus[0])
 }
 
 /// Orientation of a line's direction, degrees CCW on screen, in (-90, 90].
@@ -436,17 +462,23 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         far_tau: 0.0,
         far_open: false,
     }; 3];
+    // Where each face meets the beam: the end of its followed extent farther from the
+    // apex.
+    let base = |e: usize| {
+        let [p, q] = loc[e].ends;
+        if norm(sub(p, apex)) >= norm(sub(q, apex)) {
+            p
+        } else {
+            q
+        }
+    };
+    let bases = [base(BLUE), base(GREEN)];
     for e in 0..3 {
         let n = lines[e].normal;
         let d = along(n);
         let taus = loc[e].ends.map(|p| dot(d, sub(p, apex)));
         let corner = if e == RED {
-            // The free end is the end of the beam edge nearer the pyramid.
-            if taus[0].abs() < taus[1].abs() {
-                0
-            } else {
-                1
-            }
+            free_end(taus, bases.map(|p| dot(d, sub(p, apex))))
         } else if taus[0].abs() < taus[1].abs() {
             0
         } else {
@@ -504,4 +536,40 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         height,
         bend_tau,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::free_end;
+
+    // Positions along the beam edge (from the apex's foot) of its two followed ends and
+    // of the back and front faces' bases, as measured on rendered references.
+
+    #[test]
+    fn free_end_is_beyond_the_front_face_even_when_the_border_cuts_the_beam_nearer() {
+        // A large pyramid under a beam that leaves the frame 44 px behind the apex's
+        // foot: the free end (52.6) is further from the foot than the cut (-44.4).
+        assert_eq!(free_end([-44.4, 52.6], [-130.0, 41.3]), 1);
+        assert_eq!(free_end([52.6, -44.4], [41.3, -130.0]), 0);
+    }
+
+    #[test]
+    fn free_end_when_the_border_cuts_the_beam_at_the_back_face() {
+        assert_eq!(free_end([-42.0, 130.0], [126.8, -34.5]), 0);
+    }
+
+    #[test]
+    fn free_end_out_of_view_or_not_reached() {
+        // Only a stretch of beam behind the back face is in view: its end towards the
+        // pyramid is where the tip lies.
+        assert_eq!(free_end([-260.9, -190.9], [-162.0, 9.8]), 1);
+        // The followed extent stops short of the front face's base.
+        assert_eq!(free_end([-0.2, 165.8], [102.7, -10.3]), 0);
+    }
+
+    #[test]
+    fn symmetric_faces_fall_back_to_the_end_nearer_the_apex() {
+        assert_eq!(free_end([-10.0, 200.0], [-50.0, 48.0]), 0);
+        assert_eq!(free_end([200.0, -10.0], [48.0, -50.0]), 1);
+    }
 }
