@@ -462,23 +462,14 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         far_tau: 0.0,
         far_open: false,
     }; 3];
-    // Where each face meets the beam: the end of its followed extent farther from the
-    // apex.
-    let base = |e: usize| {
-        let [p, q] = loc[e].ends;
-        if norm(sub(p, apex)) >= norm(sub(q, apex)) {
-            p
-        } else {
-            q
-        }
-    };
-    let bases = [base(BLUE), base(GREEN)];
-    for e in 0..3 {
+    // The faces first: where they meet the beam tells which end of it is free.
+    for e in [BLUE, GREEN, RED] {
         let n = lines[e].normal;
         let d = along(n);
         let taus = loc[e].ends.map(|p| dot(d, sub(p, apex)));
         let corner = if e == RED {
-            free_end(taus, bases.map(|p| dot(d, sub(p, apex))))
+            let base = |f: usize| dot(d, edges[f].point(edges[f].far_tau));
+            free_end(taus, [base(BLUE), base(GREEN)])
         } else if taus[0].abs() < taus[1].abs() {
             0
         } else {
