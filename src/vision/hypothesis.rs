@@ -146,14 +146,23 @@ impl Search {
                 }
             }
         }
-        let mut best: Option<Hypothesis> = None;
         for h in &mut self.shortlist {
             place_missing(template, h, edges);
-            if best.is_none_or(|b| h.score > b.score) {
-                best = Some(*h);
-            }
         }
-        best
+        // Best first. Each hypothesis is one combination of candidates, so the members
+        // break ties and the order is total; sorting in place does not allocate.
+        self.shortlist.sort_unstable_by(|a, b| {
+            b.score
+                .total_cmp(&a.score)
+                .then_with(|| a.members.cmp(&b.members))
+        });
+        self.shortlist.first().copied()
+    }
+
+    /// The shortlist of the last [`Search::run`], best first (the tracker's runners-up,
+    /// when the best one is not convincing).
+    pub fn ranked(&self) -> &[Hypothesis] {
+        &self.shortlist
     }
 
     /// Places and scores the hypothesis made of candidates `idx`; shortlists it.
