@@ -18,6 +18,11 @@ use super::geometry::{sub, Line};
 use super::refine::FitResult;
 use super::template::{Pose, Template, BLUE, GREEN};
 
+/// Share of the predicted segments covered by edge pixels from which coverage counts
+/// fully (none below 0.3). On harsh frames at high magnification, Canny on the binned
+/// image breaks true faces into pieces covering 52-59 % of them while the grey-level fit
+/// holds them (docs/tracker.md, step 7); blank frames stay far below 0.5 either way.
+const FULL_COVERAGE: f64 = 0.55;
 /// Smallest confidence reported as a detection.
 pub const MIN_CONFIDENCE: f64 = 0.5;
 /// An edge in view with less than this fraction of its calibrated contrast is missing.
@@ -45,7 +50,7 @@ impl Evidence {
     /// The combined confidence in [0, 1].
     pub fn confidence(&self) -> f64 {
         let ramp = |x: f64, lo: f64, hi: f64| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
-        let coverage = ramp(self.coverage, 0.3, 0.65);
+        let coverage = ramp(self.coverage, 0.3, FULL_COVERAGE);
         let contrast = ramp(self.contrast_ratio, MIN_CONTRAST_RATIO, 0.45);
         let interior = ramp(self.interior, 0.4, 0.75);
         let precision = (-self.turn_sigma_deg / 0.3).exp();
