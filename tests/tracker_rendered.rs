@@ -366,3 +366,51 @@ fn cpu_time_per_frame() {
         }
     }
 }
+
+/// Tracking time per frame over a whole suite (the looks and magnifications the bench
+/// does not cover: frames that need runners-up, docs/performance.md), each frame tracked
+/// three times and the fastest kept: `SUITE_SEED=12 cargo test --release --test
+/// tracker_rendered suite_time -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn suite_time_per_frame() {
+    let seed = std::env::var("SUITE_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(12);
+    let mut times: Vec<(f64, &'static str, u32)> = Vec::new();
+    for session in scene::suite(seed, 12, 50) {
+        let (cfg, cal) = rendered::calibrate(&session);
+        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+        tracker.set_coherence(false);
+        let frames: Vec<_> = session.frames.iter().map(|f| render(f).0).collect();
+        tracker.track(&frames[0]);
+        for (spec, frame) in session.frames.iter().zip(&frames) {
+            let fastest = (0..3)
+                .map(|_| {
+                    let t0 = std::time::Instant::now();
+                    std::hint::black_box(tracker.track(frame));
+                    t0.elapsed().as_secs_f64() * 1e3
+                })
+                .fold(f64::INFINITY, f64::min);
+            times.push((fastest, spec.look.style_name, frame.width()));
+        }
+    }
+    for width in [640, 1280] {
+        for style in ["clean", "clutter", "noisy", "harsh", "all"] {
+            let mut v: Vec<f64> = times
+                .iter()
+                .filter(|t| t.2 == width && (style == "all" || t.1 == style))
+                .map(|t| t.0)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            let n = v.len();
+            println!(
+                "{width} {style}: {n} frames, mean {:.3} median {:.3} slowest {:.3} ms",
+                v.iter().sum::<f64>() / n as f64,
+                v[n / 2],
+                v[n - 1]
+            );
+        }
+    }
+}
