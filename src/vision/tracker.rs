@@ -51,8 +51,9 @@ const SURE_CONFIDENCE: f64 = 0.8;
 /// Most runners-up refined per attempt.
 const RUNNERS_UP: usize = 3;
 /// How much more confident than the search's choice a runner-up must be to replace it.
-/// Confidence is a verdict on one hypothesis, not a ranking: on the same frame, a
-/// wrong placement that leaves a weak face out can score a few hundredths higher.
+/// Confidence is a verdict on one hypothesis, not a ranking: near-copies of the choice
+/// (the same tip, its bands placed a little differently) verify within a few
+/// hundredths of it, either way.
 const RIVAL_MARGIN: f64 = 0.1;
 /// Runners-up placed this close to one already tried (apex, detection pixels; rotation,
 /// radians) are the same tip and are not refined again.
@@ -76,7 +77,8 @@ fn same_place(a: &Pose, b: &Pose) -> bool {
 
 /// Whether a runner-up's estimate `alt` replaces `best` (so far), when the search's
 /// choice had confidence `first`: clearly more confident, and explaining at least as
-/// many edges (leaving out a faint face raises the confidence without explaining more).
+/// many edges. A wrong placement that leaves a faint face out can verify 0.15 higher
+/// than the right tip with both faces: the confidence takes the faintest edge in view.
 fn outranks(alt: &Estimate, best: &Estimate, first: f64) -> bool {
     let edges = |e: &Estimate| e.edges.iter().flatten().count();
     alt.confidence > best.confidence.max(first + RIVAL_MARGIN) && edges(alt) >= edges(best)
