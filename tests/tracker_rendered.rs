@@ -134,9 +134,7 @@ fn a_line_beside_a_face_does_not_take_its_place() {
     // 0.54 (the scratch has a third of the face's contrast). The runner-up on the face
     // itself verifies at 0.84 and must win.
     let session = &scene::suite(12, 12, 50)[8];
-    let (cfg, cal) = rendered::calibrate(session);
-    let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
-    tracker.set_coherence(false);
+    let mut tracker = rendered::tracker(session, false);
     let (frame, truth) = render(&session.frames[47]);
     let e = tracker.track(&frame);
     let (Some(angle), Some(apex)) = (e.angle_deg, e.apex_px) else {
@@ -162,9 +160,7 @@ fn harsh_faces_broken_up_on_the_edge_map_are_still_detected() {
     let sessions = scene::suite(1, 12, 50);
     for (s, f) in [(6, 1), (9, 46)] {
         let session = &sessions[s];
-        let (cfg, cal) = rendered::calibrate(session);
-        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
-        tracker.set_coherence(false);
+        let mut tracker = rendered::tracker(session, false);
         let (frame, truth) = render(&session.frames[f]);
         let e = tracker.track(&frame);
         let Some(angle) = e.angle_deg else {
@@ -382,9 +378,7 @@ fn suite_time_per_frame() {
     let seed = suite_seed(12);
     let mut times: Vec<(f64, &'static str, u32)> = Vec::new();
     for session in scene::suite(seed, 12, 50) {
-        let (cfg, cal) = rendered::calibrate(&session);
-        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
-        tracker.set_coherence(false);
+        let mut tracker = rendered::tracker(&session, false);
         let frames: Vec<_> = session.frames.iter().map(|f| render(f).0).collect();
         tracker.track(&frames[0]);
         for (spec, frame) in session.frames.iter().zip(&frames) {

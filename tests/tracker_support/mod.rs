@@ -273,11 +273,17 @@ pub mod rendered {
         (cfg, cal)
     }
 
-    /// Renders and tracks every frame of `session` in order.
-    pub fn run(session: &Session, coherence: bool) -> (Vec<Truth>, Vec<Estimate>) {
+    /// A tracker calibrated on `session`'s reference, with its cantilever for forces.
+    pub fn tracker(session: &Session, coherence: bool) -> Tracker {
         let (cfg, cal) = calibrate(session);
         let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
         tracker.set_coherence(coherence);
+        tracker
+    }
+
+    /// Renders and tracks every frame of `session` in order.
+    pub fn run(session: &Session, coherence: bool) -> (Vec<Truth>, Vec<Estimate>) {
+        let mut tracker = tracker(session, coherence);
         let mut frame = GrayImage::new(1, 1);
         let mut truths = Vec::new();
         let mut estimates = Vec::new();
