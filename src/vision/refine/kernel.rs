@@ -6,8 +6,8 @@
 use super::gauss::{cdf_pdf_lanes, cdf_table, CdfTable};
 use super::solve::Normal;
 use super::{
-    EdgeFrame, Refiner, Sample, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS, PHOTO,
-    P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN,
+    EdgeFrame, Refiner, Sample, Stretches, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS,
+    PHOTO, P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN, STRETCH_LEVEL_SIGMA,
 };
 use crate::vision::geometry::{along, dot, rotate, sub};
 use crate::vision::simd::dispatch;
@@ -22,8 +22,12 @@ impl Refiner {
         step: usize,
     ) -> Normal {
         let mut ne = Normal::default();
-        self.chunk_sq = [0.0; 3 * CHUNKS_PER_EDGE];
-        self.chunk_n = [0; 3 * CHUNKS_PER_EDGE];
+        let st = &mut self.stretches;
+        st.sq = [0.0; 3 * CHUNKS_PER_EDGE];
+        st.n = [0; 3 * CHUNKS_PER_EDGE];
+        st.row = [[0.0; 8]; 3 * CHUNKS_PER_EDGE];
+        st.hh = [0.0; 3 * CHUNKS_PER_EDGE];
+        st.g = [0.0; 3 * CHUNKS_PER_EDGE];
         let mut sq = [0.0f64; 3];
         let mut wsum = [0.0f64; 3];
         let blur = x[P_BLUR];
@@ -55,17 +59,15 @@ impl Refiner {
                 huber: 1.5 * noise[e],
             };
             let range = self.ranges[e].clone();
-            let acc = accumulate_edge(
-                &self.samples[range],
-                step,
-                f,
-                &params,
-                &self.chunk_ok,
-                &mut self.chunk_sq,
-                &mut self.chunk_n,
-            );
+            let mut acc =
+                accumulate_edge(&self.samples[range], step, f, &params, &mut self.stretches);
             sq[e] = acc.sq;
             wsum[e] = acc.wsum;
+            self.slots[e] = slots;
+            // The stretches' own outside levels, with their prior, eliminated.
+            let n2 = noise[e].min(1e6).powi(2);
+            let weight = n2 / (STRETCH_LEVEL_SIGMA * STRETCH_LEVEL_SIGMA * step as f64);
+            eliminate_stretches(&mut self.stretches, e, weight, &mut acc);
             let mut k = 0;
             for i in 0..8 {
                 ne.g[slots[i]] += acc.g[i];
@@ -107,6 +109,30 @@ impl Refiner {
     }
 }
 
+/// Eliminates edge `e`'s stretch levels from its sums `acc` (the Schur complement: a
+/// stretch level is seen only by its own samples), after adding their prior (zero
+/// around the edge's linear outside level, `weight` in the units of the pixel sums).
+/// Leaves in `st.hh` and `st.g` each level's own equation, for [`Refiner::step_levels`].
+fn eliminate_stretches(st: &mut Stretches, e: usize, weight: f64, acc: &mut EdgeSums) {
+    for c in e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE {
+        if st.hh[c] <= 0.0 {
+            st.hh[c] = 0.0;
+            continue;
+        }
+        st.hh[c] += weight;
+        st.g[c] -= weight * st.level[c];
+        let (row, hh, g) = (st.row[c], st.hh[c], st.g[c]);
+        let mut k = 0;
+        for i in 0..8 {
+            acc.g[i] -= row[i] * g / hh;
+            for j in i..8 {
+                acc.h[k] -= row[i] * row[j] / hh;
+                k += 1;
+            }
+        }
+    }
+}
+
 /// The current parameters of one edge, as the inner loop needs them.
 struct EdgeParams {
     normal: [f64; 2],
@@ -141,9 +167,7 @@ fn accumulate_edge_body(
     step: usize,
     f: &EdgeFrame,
     p: &EdgeParams,
-    chunk_ok: &[bool],
-    chunk_sq: &mut [f64],
-    chunk_n: &mut [u32],
+    st: &mut Stretches,
 ) -> EdgeSums {
     let mut acc = Accumulator::default();
     let (mut sq, mut wsum) = (0.0, 0.0);
@@ -151,19 +175,21 @@ fn accumulate_edge_body(
     let corner_t = dot(p.along, sub(f.corner, f.origin));
     let table = cdf_table();
     let mut batch = Batch::default();
+    let mut lanes = StretchLanes::default();
     for first in (0..samples.len()).step_by(LANES * step) {
         batch.fill(samples, first, step);
-        let m = batch.model(table, f, p, inv_blur, corner_t);
-        let all_ok = batch.sums(&m, chunk_ok, chunk_sq, chunk_n, &mut sq, &mut wsum);
+        let m = batch.model(table, f, p, inv_blur, corner_t, &st.level);
+        let all_ok = batch.sums(&m, st, &mut lanes, &mut sq, &mut wsum);
         if all_ok && acc.lane == 0 {
             // The common case: the batch's lanes are the accumulator's.
             acc.add(&m.jac, &m.weight, &m.r);
         } else {
-            for l in (0..batch.len).filter(|&l| chunk_ok[batch.chunk[l]]) {
+            for l in (0..batch.len).filter(|&l| st.ok[batch.chunk[l]]) {
                 acc.push(&m, l);
             }
         }
     }
+    lanes.flush(st);
     let (h, g) = acc.finish();
     EdgeSums { h, g, sq, wsum }
 }
@@ -175,9 +201,7 @@ dispatch! {
         step: usize,
         f: &EdgeFrame,
         p: &EdgeParams,
-        chunk_ok: &[bool],
-        chunk_sq: &mut [f64],
-        chunk_n: &mut [u32],
+        st: &mut Stretches,
     ) -> EdgeSums => accumulate_edge_body
 }
 
@@ -310,6 +334,65 @@ fn flush(
     }
 }
 
+/// One stretch's level terms (see [`Stretches`]) being summed lane by lane while the
+/// batches stay in that stretch; added to the stretch's sums when they move on.
+struct StretchLanes {
+    /// The stretch being summed, if any.
+    chunk: Option<usize>,
+    /// Products of the level's share with the eight local parameters' Jacobians, with
+    /// itself and with the residuals, weighted.
+    row: [[f64; LANES]; 8],
+    hh: [f64; LANES],
+    g: [f64; LANES],
+}
+
+impl Default for StretchLanes {
+    fn default() -> Self {
+        StretchLanes {
+            chunk: None,
+            row: [[0.0; LANES]; 8],
+            hh: [0.0; LANES],
+            g: [0.0; LANES],
+        }
+    }
+}
+
+impl StretchLanes {
+    /// Adds the four samples of `m`, all in stretch `c`.
+    // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn add(&mut self, c: usize, m: &ModelLanes, st: &mut Stretches) {
+        if self.chunk != Some(c) {
+            self.flush(st);
+            self.chunk = Some(c);
+        }
+        let mut wq = [0.0; LANES];
+        for l in 0..LANES {
+            wq[l] = m.weight[l] * m.q[l];
+            self.hh[l] += wq[l] * m.q[l];
+            self.g[l] += wq[l] * m.r[l];
+        }
+        for a in 0..8 {
+            for l in 0..LANES {
+                self.row[a][l] += wq[l] * m.jac[a][l];
+            }
+        }
+    }
+
+    /// Adds the lanes to their stretch's sums and empties them.
+    #[inline(always)]
+    fn flush(&mut self, st: &mut Stretches) {
+        let Some(c) = self.chunk.take() else { return };
+        st.hh[c] += self.hh.iter().sum::<f64>();
+        st.g[c] += self.g.iter().sum::<f64>();
+        for (total, lanes) in st.row[c].iter_mut().zip(&self.row) {
+            *total += lanes.iter().sum::<f64>();
+        }
+        *self = StretchLanes::default();
+    }
+}
+
 /// Up to [`LANES`] samples, unpacked for lane arithmetic.
 #[derive(Default)]
 struct Batch {
@@ -331,6 +414,8 @@ struct ModelLanes {
     wr2: [f64; LANES],
     /// Jacobian: turn, offset, bend, blur, level, level slope, contrast, contrast slope.
     jac: [[f64; LANES]; 8],
+    /// The stretch level's share of the sample (1 outside the edge, 0 inside).
+    q: [f64; LANES],
 }
 
 impl Batch {
@@ -354,43 +439,52 @@ impl Batch {
     }
 
     /// Adds the batch's squared residuals `m.r2` to their stretches' sums and, for the
-    /// samples of stretches that count, `m.wr2` to `sq` and the weights to `wsum`,
-    /// sample after sample in the samples' order; returns whether all four count.
+    /// samples of stretches that count, `m.wr2` to `sq`, the weights to `wsum` and the
+    /// stretch level's terms to its normal equations (through `lanes` while the batches
+    /// stay in one stretch), sample after sample in the samples' order; returns whether
+    /// all four count.
     #[inline(always)]
     fn sums(
         &self,
         m: &ModelLanes,
-        chunk_ok: &[bool],
-        chunk_sq: &mut [f64],
-        chunk_n: &mut [u32],
+        st: &mut Stretches,
+        lanes: &mut StretchLanes,
         sq: &mut f64,
         wsum: &mut f64,
     ) -> bool {
         let c = self.chunk[0];
         if self.len == LANES && self.chunk == [c; LANES] {
-            // The common case: one stretch (its sum kept in a register).
-            let mut s = chunk_sq[c];
+            // The common case: one stretch (its sums kept in registers).
+            let mut s = st.sq[c];
             for r2 in m.r2 {
                 s += r2;
             }
-            chunk_sq[c] = s;
-            chunk_n[c] += LANES as u32;
-            if chunk_ok[c] {
+            st.sq[c] = s;
+            st.n[c] += LANES as u32;
+            if st.ok[c] {
                 for l in 0..LANES {
                     *sq += m.wr2[l];
                     *wsum += m.weight[l];
                 }
+                lanes.add(c, m, st);
             }
-            return chunk_ok[c];
+            return st.ok[c];
         }
+        lanes.flush(st);
         let mut all_ok = self.len == LANES;
         for l in 0..self.len {
             let c = self.chunk[l];
-            chunk_sq[c] += m.r2[l];
-            chunk_n[c] += 1;
-            if chunk_ok[c] {
+            st.sq[c] += m.r2[l];
+            st.n[c] += 1;
+            if st.ok[c] {
                 *sq += m.wr2[l];
                 *wsum += m.weight[l];
+                let wq = m.weight[l] * m.q[l];
+                st.hh[c] += wq * m.q[l];
+                st.g[c] += wq * m.r[l];
+                for (row, jac) in st.row[c].iter_mut().zip(&m.jac) {
+                    *row += wq * jac[l];
+                }
             } else {
                 all_ok = false;
             }
@@ -418,6 +512,7 @@ impl Batch {
         p: &EdgeParams,
         inv_blur: f64,
         corner_t: f64,
+        levels: &[f64],
     ) -> ModelLanes {
         let mut u = [0.0; LANES];
         let mut w3 = [0.0; LANES];
@@ -443,17 +538,22 @@ impl Batch {
             weight: [0.0; LANES],
             wr2: [0.0; LANES],
             jac: [[0.0; LANES]; 8],
+            q: [0.0; LANES],
         };
         for l in 0..LANES {
             let contrast = p.photo[2] + p.photo[3] * un[l];
-            let r = self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast * cdf[l]);
+            let level = levels[self.chunk[l]];
+            let q = 1.0 - cdf[l];
+            let r =
+                self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast * cdf[l] + level * q);
             let weight = if r.abs() <= p.huber {
                 1.0
             } else {
                 p.huber / r.abs()
             };
             (m.r[l], m.r2[l], m.weight[l], m.wr2[l]) = (r, r * r, weight, weight * r * r);
-            let dd = contrast * pdf[l] * inv_blur;
+            m.q[l] = q;
+            let dd = (contrast - level) * pdf[l] * inv_blur;
             let (u, w3, z, un, cdf) = (u[l], w3[l], z[l], un[l], cdf[l]);
             let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
             for (ja, v) in m.jac.iter_mut().zip(jac) {

@@ -190,6 +190,9 @@ const CHUNK_MIN_LINES: f64 = 10.0;
 /// A stretch is an outlier when its mean squared residual exceeds this many times the
 /// median over the edge's stretches.
 const CHUNK_OUTLIER_RATIO: f64 = 1.7;
+/// Prior standard deviation of a stretch's own outside level around its edge's linear
+/// one, grey levels.
+pub(super) const STRETCH_LEVEL_SIGMA: f64 = 40.0;
 
 /// Reusable buffers of the fit.
 #[derive(Debug)]
@@ -197,9 +200,41 @@ pub struct Refiner {
     samples: Vec<Sample>,
     /// The samples of each edge (contiguous).
     ranges: [std::ops::Range<usize>; 3],
-    chunk_ok: [bool; 3 * CHUNKS_PER_EDGE],
-    chunk_sq: [f64; 3 * CHUNKS_PER_EDGE],
-    chunk_n: [u32; 3 * CHUNKS_PER_EDGE],
+    stretches: Stretches,
+    /// Each edge's eight local parameters' places in the fit's (turn, offset, bend,
+    /// blur, level, level slope, contrast, contrast slope).
+    slots: [[usize; 8]; 3],
+}
+
+/// Per stretch of every band (see [`CHUNKS_PER_EDGE`]): whether it counts, its residual
+/// statistics, and its own outside level with what the last normal equations said of it.
+#[derive(Debug)]
+pub(super) struct Stretches {
+    pub ok: [bool; 3 * CHUNKS_PER_EDGE],
+    /// Sum of squared residuals and samples, over every sample (counted or not).
+    pub sq: [f64; 3 * CHUNKS_PER_EDGE],
+    pub n: [u32; 3 * CHUNKS_PER_EDGE],
+    /// The stretch's outside level, relative to the edge's linear one (grey levels).
+    pub level: [f64; 3 * CHUNKS_PER_EDGE],
+    /// Normal-equation terms of `level`: its products with the edge's eight local
+    /// parameters, with itself, and with the residuals (counted samples only).
+    pub row: [[f64; 8]; 3 * CHUNKS_PER_EDGE],
+    pub hh: [f64; 3 * CHUNKS_PER_EDGE],
+    pub g: [f64; 3 * CHUNKS_PER_EDGE],
+}
+
+impl Default for Stretches {
+    fn default() -> Self {
+        Stretches {
+            ok: [true; 3 * CHUNKS_PER_EDGE],
+            sq: [0.0; 3 * CHUNKS_PER_EDGE],
+            n: [0; 3 * CHUNKS_PER_EDGE],
+            level: [0.0; 3 * CHUNKS_PER_EDGE],
+            row: [[0.0; 8]; 3 * CHUNKS_PER_EDGE],
+            hh: [0.0; 3 * CHUNKS_PER_EDGE],
+            g: [0.0; 3 * CHUNKS_PER_EDGE],
+        }
+    }
 }
 
 impl Default for Refiner {
@@ -207,9 +242,8 @@ impl Default for Refiner {
         Refiner {
             samples: Vec::new(),
             ranges: [0..0, 0..0, 0..0],
-            chunk_ok: [true; 3 * CHUNKS_PER_EDGE],
-            chunk_sq: [0.0; 3 * CHUNKS_PER_EDGE],
-            chunk_n: [0; 3 * CHUNKS_PER_EDGE],
+            stretches: Stretches::default(),
+            slots: [[0; 8]; 3],
         }
     }
 }
@@ -223,6 +257,22 @@ struct EdgeFrame {
     /// +1 or -1: the sign of the along-coordinate from the free end towards the clamp.
     towards: f64,
     curved: bool,
+}
+
+impl EdgeFrame {
+    /// Signed distance of `p` inside the edge at the starting line and a bend of
+    /// `bend` (the kernel's `d`, before the fit moves the line).
+    fn depth(&self, p: [f64; 2], bend: f64) -> f64 {
+        let rel = sub(p, self.origin);
+        let u = dot(along(self.normal0), rel);
+        let corner_t = dot(along(self.normal0), sub(self.corner, self.origin));
+        let w = if self.curved {
+            (self.towards * (u - corner_t)).max(0.0) / BEND_UNIT_PX
+        } else {
+            0.0
+        };
+        dot(self.normal0, rel) - bend * w * w * w
+    }
 }
 
 impl Refiner {
@@ -276,7 +326,7 @@ impl Refiner {
         self.init_photometry(&frames, &mut x);
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
-        self.chunk_ok = [true; 3 * CHUNKS_PER_EDGE];
+        self.stretches.ok = [true; 3 * CHUNKS_PER_EDGE];
         for iter in 0..iterations_max {
             // The first iterations, far from the solution, on every other pixel.
             let step = if iter < subsampled { 2 } else { 1 };
@@ -295,7 +345,9 @@ impl Refiner {
             }
             let step = solve(&ne.h, &ne.g, &ne.fixed)?;
             noise = ne.noise;
+            let before = x;
             apply(&mut x, &step);
+            self.step_levels(&before, &x);
             if iter <= subsampled {
                 self.reject_chunks();
             }
@@ -395,8 +447,8 @@ impl Refiner {
             let mut means = [0.0f64; CHUNKS_PER_EDGE];
             let mut n = 0;
             for c in range.clone() {
-                if self.chunk_n[c] >= 8 {
-                    means[n] = self.chunk_sq[c] / self.chunk_n[c] as f64;
+                if self.stretches.n[c] >= 8 {
+                    means[n] = self.stretches.sq[c] / self.stretches.n[c] as f64;
                     n += 1;
                 }
             }
@@ -407,25 +459,31 @@ impl Refiner {
             means.sort_by(f64::total_cmp);
             let median = means[n / 2];
             for c in range {
-                if self.chunk_n[c] >= 8 {
-                    let mean = self.chunk_sq[c] / self.chunk_n[c] as f64;
-                    self.chunk_ok[c] = mean <= CHUNK_OUTLIER_RATIO * median;
+                if self.stretches.n[c] >= 8 {
+                    let mean = self.stretches.sq[c] / self.stretches.n[c] as f64;
+                    self.stretches.ok[c] = mean <= CHUNK_OUTLIER_RATIO * median;
                 }
             }
         }
     }
 
-    /// Starting levels: mean outside and inside the line, per edge.
-    fn init_photometry(&self, frames: &[Option<EdgeFrame>; 3], x: &mut [f64; N_PARAMS]) {
+    /// Starting levels: mean outside and inside the line, per edge, and each stretch's
+    /// outside level relative to its edge's.
+    fn init_photometry(&mut self, frames: &[Option<EdgeFrame>; 3], x: &mut [f64; N_PARAMS]) {
         let mut acc = [[0.0f64; 4]; 3];
+        let mut outside = [[0.0f64; 2]; 3 * CHUNKS_PER_EDGE];
         for s in &self.samples {
             let e = s.edge as usize;
             let Some(f) = &frames[e] else { continue };
-            let d = dot(f.normal0, sub([s.x as f64, s.y as f64], f.origin));
+            let d = f.depth([s.x as f64, s.y as f64], x[P_BEND]);
             let side = if d > 0.0 { 2 } else { 0 };
             if d.abs() > 1.5 {
                 acc[e][side] += s.value as f64;
                 acc[e][side + 1] += 1.0;
+            }
+            if d < -1.5 {
+                outside[s.chunk as usize][0] += s.value as f64;
+                outside[s.chunk as usize][1] += 1.0;
             }
         }
         for e in 0..3 {
@@ -433,7 +491,78 @@ impl Refiner {
             let inside = acc[e][2] / acc[e][3].max(1.0);
             x[P_PHOTO + PHOTO * e] = out;
             x[P_PHOTO + PHOTO * e + 2] = inside - out;
+            let stretches = e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE;
+            for (level, &[sum, n]) in self.stretches.level[stretches.clone()]
+                .iter_mut()
+                .zip(&outside[stretches])
+            {
+                *level = if n >= 4.0 { sum / n - out } else { 0.0 };
+            }
         }
+    }
+
+    /// Moves each stretch's outside level with the step the fit took (`before` to
+    /// `after`): the level's own equation, with the other parameters' steps
+    /// substituted (the elimination of [`Stretches`] in reverse).
+    fn step_levels(&mut self, before: &[f64; N_PARAMS], after: &[f64; N_PARAMS]) {
+        let st = &mut self.stretches;
+        for e in 0..3 {
+            let slots = self.slots[e];
+            let delta: [f64; 8] = std::array::from_fn(|i| after[slots[i]] - before[slots[i]]);
+            for c in e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE {
+                if st.hh[c] > 0.0 {
+                    let coupled: f64 = st.row[c].iter().zip(&delta).map(|(r, d)| r * d).sum();
+                    st.level[c] += (st.g[c] - coupled) / st.hh[c];
+                }
+            }
+        }
+    }
+
+    /// Edge `e`'s typical step from outside to inside and the outside level it starts
+    /// from: those of the median stretch by step (weighted by samples) among the ones
+    /// that count. Each stretch's step is the contrast and its slope there less the
+    /// stretch's own outside level, so a bright substrate beside part of a face does not
+    /// pull the face's contrast down as a whole.
+    fn step_height(
+        &self,
+        e: usize,
+        f: &EdgeFrame,
+        x: &[f64; N_PARAMS],
+        normal: [f64; 2],
+    ) -> (f64, f64) {
+        let base = e * CHUNKS_PER_EDGE;
+        let mut along_sum = [0.0f64; CHUNKS_PER_EDGE];
+        let mut count = [0u32; CHUNKS_PER_EDGE];
+        let d = along(normal);
+        for s in &self.samples[self.ranges[e].clone()] {
+            let c = s.chunk as usize - base;
+            along_sum[c] += dot(d, sub([s.x as f64, s.y as f64], f.origin));
+            count[c] += 1;
+        }
+        let p = &x[P_PHOTO + PHOTO * e..P_PHOTO + PHOTO * (e + 1)];
+        // (step, outside level, samples) per stretch that counts.
+        let mut steps = [(0.0f64, 0.0f64, 0u32); CHUNKS_PER_EDGE];
+        let mut n = 0;
+        for c in 0..CHUNKS_PER_EDGE {
+            if count[c] == 0 || !self.stretches.ok[base + c] {
+                continue;
+            }
+            let un = along_sum[c] / count[c] as f64 / ALONG_UNIT_PX;
+            let own = self.stretches.level[base + c];
+            steps[n] = (p[2] + p[3] * un - own, p[0] + p[1] * un + own, count[c]);
+            n += 1;
+        }
+        let steps = &mut steps[..n];
+        steps.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let total: u32 = steps.iter().map(|s| s.2).sum();
+        let mut acc = 0;
+        for &(step, level, k) in steps.iter() {
+            acc += k;
+            if 2 * acc >= total {
+                return (step, level);
+            }
+        }
+        (p[2], p[0])
     }
 
     fn result(
@@ -452,10 +581,11 @@ impl Refiner {
                 normal,
                 rho: dot(normal, f.origin) + x[P_OFFSET + e],
             };
+            let (contrast, level) = self.step_height(e, f, x, normal);
             edges[e] = Some(EdgeResult {
                 line,
-                contrast: x[P_PHOTO + PHOTO * e + 2],
-                level: x[P_PHOTO + PHOTO * e],
+                contrast,
+                level,
                 noise: ne.noise[e],
                 samples: self.ranges[e].len(),
                 turn,
