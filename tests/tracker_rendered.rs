@@ -67,19 +67,23 @@ fn suite_of_600_rendered_frames() {
     assert!(sc.positives >= 550, "{why}");
     assert!(sc.detect_rate >= 0.998, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.012, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.086, "{why}");
+    // Measured 0.0111, 0.0753 and 0.070 px since each stretch of a band has its own
+    // outside level (0.0115, 0.082 and 0.076 before).
+    assert!(sc.angle_err_median_deg <= 0.0115, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.078, "{why}");
     // The worst frames are harsh ones whose error is 2-3 times the fit's own standard
     // error (Estimate::angle_sigma_deg, 0.07-0.1 deg there): noise, not a failure
-    // (docs/tracker.md, Accuracy). Measured 0.327, and 0.265 since the prior on the
-    // probe side's shading.
-    assert!(sc.angle_err_max_deg <= 0.28, "{why}");
-    assert!(sc.tip_err_median_px <= 0.085, "{why}");
+    // (docs/tracker.md, Accuracy). Measured 0.327, 0.265 since the prior on the probe
+    // side's shading, 0.235 since the stretches' own outside levels.
+    assert!(sc.angle_err_max_deg <= 0.25, "{why}");
+    assert!(sc.tip_err_median_px <= 0.075, "{why}");
+    // Measured (median, p95): clean 0.0037, 0.015; clutter 0.0100, 0.042; noisy
+    // 0.0147, 0.048; harsh 0.0275, 0.121.
     for (style, median, p95) in [
-        ("clean", 0.0045, 0.02),
-        ("clutter", 0.0105, 0.048),
-        ("noisy", 0.017, 0.07),
-        ("harsh", 0.038, 0.125),
+        ("clean", 0.0042, 0.017),
+        ("clutter", 0.0105, 0.045),
+        ("noisy", 0.016, 0.052),
+        ("harsh", 0.030, 0.125),
     ] {
         let (ts, es) = of_style(&t, &e, style);
         let sc = score(&ts, &es);
@@ -149,6 +153,36 @@ fn a_line_beside_a_face_does_not_take_its_place() {
         truth.tip_x,
         truth.tip_y
     );
+}
+
+#[test]
+fn a_substrate_beside_part_of_a_face_does_not_lean_it() {
+    // Suite 31, session 1, frame 38 (harsh, 1578x): the apex dips into the substrate,
+    // whose edge crosses both faces a few dozen pixels up, so each face has the bright
+    // substrate outside one part and the dark background outside the rest. A single
+    // outside level (with a slope) along the face cannot follow that step, and the
+    // misfit leaned the tip: 0.046 deg off with the noise turned off (0.011 without
+    // the substrate), 0.265 deg with it on (the suite's worst frame then). Each stretch
+    // of a band now has its own outside level.
+    let session = &scene::suite(31, 12, 50)[1];
+    let mut tracker = rendered::tracker(session, false);
+    let mut spec = session.frames[38];
+    let (noisy, truth) = render(&spec);
+    spec.look.noise_sigma = 0.0;
+    spec.look.jitter_fraction = 0.0;
+    let (clean, _) = render(&spec);
+    // Measured: 0.003 deg without the noise, 0.164 with it (fit sigma 0.072).
+    for (frame, name, limit) in [(&clean, "noise-free", 0.015), (&noisy, "noisy", 0.2)] {
+        let e = tracker.track(frame);
+        let Some(angle) = e.angle_deg else {
+            panic!("{name}: not detected: {e:?}");
+        };
+        assert!(
+            (angle - truth.angle_deg).abs() <= limit,
+            "{name}: {angle} for {}",
+            truth.angle_deg
+        );
+    }
 }
 
 #[test]
@@ -253,9 +287,10 @@ fn coherence_is_a_shortcut_never_a_dependency() {
         assert_eq!(sc.false_detections, 0, "{why}");
         // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
         // Measured p95 0.213 and max 0.302; since the prior on the probe side's
-        // shading 0.176 and 0.344 (frames above 0.2 deg: 15 -> 4, one frame worse).
+        // shading 0.176 and 0.344 (frames above 0.2 deg: 15 -> 4, one frame worse);
+        // since the stretches' own outside levels 0.146 and 0.266.
         assert!(
-            sc.angle_err_p95_deg <= 0.185 && sc.angle_err_max_deg <= 0.35,
+            sc.angle_err_p95_deg <= 0.155 && sc.angle_err_max_deg <= 0.28,
             "{why}"
         );
     }

@@ -21,10 +21,12 @@ fn mixed_sample_in_random_order() {
     let why = format!("{sc:?}\n{}", table(&s.truth, &est));
     assert_eq!(sc.detect_rate, 1.0, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.044, "{why}");
-    assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
-    assert!(sc.angle_err_max_deg <= 0.26, "{why}");
-    assert!(sc.tip_err_median_px <= 0.75, "{why}");
+    // The targets. Measured 0.0294, 0.0988, 0.223 deg and 0.66 px since each
+    // stretch of a band has its own outside level (0.042, 0.123, 0.252 before).
+    assert!(sc.angle_err_median_deg <= 0.03, "{why}");
+    assert!(sc.angle_err_p95_deg <= 0.10, "{why}");
+    assert!(sc.angle_err_max_deg <= 0.235, "{why}");
+    assert!(sc.tip_err_median_px <= 0.7, "{why}");
 }
 
 #[test]
@@ -35,9 +37,11 @@ fn sequence_sample_with_and_without_coherence() {
         let sc = score(&s.truth, &est);
         let why = format!("coherence {coherence}: {sc:?}\n{}", table(&s.truth, &est));
         assert_eq!(sc.detect_rate, 1.0, "{why}");
-        assert!(sc.angle_err_median_deg <= 0.022, "{why}");
-        assert!(sc.angle_err_p95_deg <= 0.066, "{why}");
-        assert!(sc.angle_err_max_deg <= 0.09, "{why}");
+        // Measured 0.0189, 0.0545, 0.080 deg and 0.553 px (0.020, 0.062, 0.085 before
+        // the stretches' own outside levels).
+        assert!(sc.angle_err_median_deg <= 0.020, "{why}");
+        assert!(sc.angle_err_p95_deg <= 0.058, "{why}");
+        assert!(sc.angle_err_max_deg <= 0.085, "{why}");
         assert!(sc.tip_err_median_px <= 0.6, "{why}");
     }
 }
