@@ -1,7 +1,8 @@
 //! The inner loop of the fit: every sample's residual, robust weight and Jacobian,
 //! accumulated into the normal equations (about 44 products per sample and iteration,
-//! which is where the tracker spends a quarter to a third of its time). It runs as an
-//! AVX2 copy where the CPU has it (`vision::simd`).
+//! and ten more for its stretch's own outside level; this is where the tracker spends
+//! a quarter to a third of its time). It runs as an AVX2 copy where the CPU has it
+//! (`vision::simd`).
 
 use super::gauss::{cdf_pdf_lanes, cdf_table, CdfTable};
 use super::solve::Normal;

@@ -4,13 +4,15 @@
 //! levels keep it. Around each found edge a band of pixels is fitted with a blurred step
 //!
 //! ```text
-//! I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur),
+//! I(p) = level + slope * u + (contrast + cslope * u) * Phi(d(p) / blur)
+//!        + own[stretch(p)] * (1 - Phi(d(p) / blur)),
 //! d(p) = n(psi) . (p - origin) - offset  [- bend * w(p)^3 on the beam edge]
 //! ```
 //!
 //! (`Phi` the normal CDF, `u` the position along the edge, for slow shading and the
-//! probe's brightness ramp, with a prior that the probe side's is small), by robust
-//! (Huber) Gauss-Newton. In tracking mode one rotation `psi` is shared by all edges,
+//! probe's brightness ramp, with a prior that the probe side's is small; `own` each
+//! stretch's outside level on top of the linear one, with a zero-mean prior, for a
+//! substrate or particle beside part of the edge), by robust (Huber) Gauss-Newton. In tracking mode one rotation `psi` is shared by all edges,
 //! which is what a rigid tip means; in calibration mode each edge turns on its own.
 //! The beam edge is straight along the rigid block at its end and curves behind it
 //! along the elastica: its offset from the free-end tangent grows as the cube of the
