@@ -21,7 +21,7 @@ fn mixed_sample_in_random_order() {
     let why = format!("{sc:?}\n{}", table(&s.truth, &est));
     assert_eq!(sc.detect_rate, 1.0, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    // The targets. Measured 0.0294, 0.0988, 0.223 deg and 0.66 px since each
+    // The targets. Measured 0.0298, 0.0988, 0.223 deg and 0.66 px since each
     // stretch of a band has its own outside level (0.042, 0.123, 0.252 before).
     assert!(sc.angle_err_median_deg <= 0.03, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.10, "{why}");

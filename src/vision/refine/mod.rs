@@ -266,8 +266,9 @@ impl EdgeFrame {
     /// `bend` (the kernel's `d`, before the fit moves the line).
     fn depth(&self, p: [f64; 2], bend: f64) -> f64 {
         let rel = sub(p, self.origin);
-        let u = dot(along(self.normal0), rel);
-        let corner_t = dot(along(self.normal0), sub(self.corner, self.origin));
+        let a = along(self.normal0);
+        let u = dot(a, rel);
+        let corner_t = dot(a, sub(self.corner, self.origin));
         let w = if self.curved {
             (self.towards * (u - corner_t)).max(0.0) / BEND_UNIT_PX
         } else {
