@@ -7,8 +7,9 @@
 use super::gauss::{cdf_pdf_lanes, cdf_table, CdfTable};
 use super::solve::Normal;
 use super::{
-    EdgeFrame, Refiner, Sample, Stretches, ALONG_UNIT_PX, BEND_UNIT_PX, CHUNKS_PER_EDGE, N_PARAMS,
-    PHOTO, P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN, STRETCH_LEVEL_SIGMA,
+    pixel_weight, EdgeFrame, Refiner, Sample, Stretches, ALONG_UNIT_PX, BEND_UNIT_PX,
+    CHUNKS_PER_EDGE, N_PARAMS, PHOTO, P_BEND, P_BLUR, P_OFFSET, P_PHOTO, P_TURN,
+    STRETCH_LEVEL_SIGMA,
 };
 use crate::vision::geometry::{along, dot, rotate, sub};
 use crate::vision::simd::dispatch;
@@ -66,8 +67,7 @@ impl Refiner {
             wsum[e] = acc.wsum;
             self.slots[e] = slots;
             // The stretches' own outside levels, with their prior, eliminated.
-            let n2 = noise[e].min(1e6).powi(2);
-            let weight = n2 / (STRETCH_LEVEL_SIGMA * STRETCH_LEVEL_SIGMA * step as f64);
+            let weight = pixel_weight(noise[e], STRETCH_LEVEL_SIGMA, step);
             eliminate_stretches(&mut self.stretches, e, weight, &mut acc);
             let mut k = 0;
             for i in 0..8 {
@@ -116,8 +116,8 @@ impl Refiner {
 /// Leaves in `st.hh` and `st.g` each level's own equation, for [`Refiner::step_levels`].
 fn eliminate_stretches(st: &mut Stretches, e: usize, weight: f64, acc: &mut EdgeSums) {
     for c in e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE {
-        if st.hh[c] <= 0.0 {
-            st.hh[c] = 0.0;
+        if st.hh[c] == 0.0 {
+            // No sample of the stretch counts: its level stays where it is.
             continue;
         }
         st.hh[c] += weight;

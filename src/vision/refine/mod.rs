@@ -12,8 +12,9 @@
 //! (`Phi` the normal CDF, `u` the position along the edge, for slow shading and the
 //! probe's brightness ramp, with a prior that the probe side's is small; `own` each
 //! stretch's outside level on top of the linear one, with a zero-mean prior, for a
-//! substrate or particle beside part of the edge), by robust (Huber) Gauss-Newton. In tracking mode one rotation `psi` is shared by all edges,
-//! which is what a rigid tip means; in calibration mode each edge turns on its own.
+//! substrate or particle beside part of the edge), by robust (Huber) Gauss-Newton. In
+//! tracking mode one rotation `psi` is shared by all edges, which is what a rigid tip
+//! means; in calibration mode each edge turns on its own.
 //! The beam edge is straight along the rigid block at its end and curves behind it
 //! along the elastica: its offset from the free-end tangent grows as the cube of the
 //! distance `w` behind the block (the bending moment grows linearly from there), so a
@@ -337,11 +338,11 @@ impl Refiner {
             // Expectations as observations, weighted like the pixels (whose sums the
             // normal equations hold): the physics' bend, and the slow shading.
             if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
-                let weight = pixel_weight(&ne, RED_BAND, b.bend_sigma, step);
+                let weight = pixel_weight(ne.noise[RED_BAND], b.bend_sigma, step);
                 prior(&mut ne, &x, &[P_BEND], b.bend0, weight);
             }
             for e in (0..3).filter(|&e| frames[e].is_some()) {
-                let weight = pixel_weight(&ne, e, PROBE_SLOPE_SIGMA, step);
+                let weight = pixel_weight(ne.noise[e], PROBE_SLOPE_SIGMA, step);
                 // The probe side's slope: level slope plus contrast slope.
                 let p0 = P_PHOTO + PHOTO * e;
                 prior(&mut ne, &x, &[p0 + 1, p0 + 3], 0.0, weight);
@@ -604,10 +605,11 @@ impl Refiner {
     }
 }
 
-/// Weight of an observation with standard deviation `sigma` in the units of edge `e`'s
-/// pixel sums (their noise squared; halved when every other pixel is summed).
-fn pixel_weight(ne: &Normal, e: usize, sigma: f64, step: usize) -> f64 {
-    let n2 = ne.noise[e].min(1e6).powi(2);
+/// Weight of an observation with standard deviation `sigma` in the units of an edge's
+/// pixel sums, whose residuals measure `noise` (its square; halved when every other
+/// pixel is summed).
+pub(super) fn pixel_weight(noise: f64, sigma: f64, step: usize) -> f64 {
+    let n2 = noise.min(1e6).powi(2);
     n2 / (sigma * sigma * step as f64)
 }
 
