@@ -67,9 +67,9 @@ const ALONG_UNIT_PX: f64 = 100.0;
 /// band a few blurs wide); a long edge measures them far better than this and is not
 /// held. The outside's slope stays free: particles and the substrate make the
 /// background vary along an edge, and holding it costs cluttered frames accuracy.
-/// Measured on the rendered suite (docs/tracker.md): suite RMS angle error 0.0426 ->
-/// 0.0371 deg, frames above 0.2 deg 22 -> 9 of 2,859; 0.7 and 1.5 measure the same,
-/// 6 loses a third of the gain.
+/// Measured on the rendered suite (docs/tracker-notes.md): suite RMS angle error
+/// 0.0426 -> 0.0371 deg, frames above 0.2 deg 22 -> 9 of 2,859; 0.7 and 1.5 measure
+/// the same, 6 loses a third of the gain.
 const PROBE_SLOPE_SIGMA: f64 = 2.5;
 const N_PARAMS: usize = 8 + 3 * PHOTO;
 /// Parameter layout.
