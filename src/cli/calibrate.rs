@@ -129,14 +129,16 @@ pub fn calibration_block(clicks: &CalibrationConfig, calibration: &Calibration) 
         points(&clicks.green)
     );
     out.push_str(
-        "# Refined on the reference image (degrees, CCW on screen); from the clicks alone:\n",
+        "# Refined on the reference image (degrees, CCW on screen, +- the standard error\n\
+         # from the reference's noise); from the clicks alone:\n",
     );
     for edge in [Edge::Red, Edge::Blue, Edge::Green] {
         let e = calibration.edge(edge);
         out.push_str(&format!(
-            "#   {:<5} {:>9.3}   (clicks {:>9.3}, {:+.3})\n",
+            "#   {:<5} {:>9.3} +- {:.3}   (clicks {:>9.3}, {:+.3})\n",
             edge.name(),
             e.orientation_deg,
+            e.orientation_sigma_deg,
             e.clicked_orientation_deg,
             e.clicked_orientation_deg - e.orientation_deg
         ));

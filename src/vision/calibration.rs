@@ -17,7 +17,7 @@ use super::candidates::angle_gap;
 use super::edges::EdgeMap;
 use super::geometry::{along, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
 use super::pyramid::Pyramid;
-use super::refine::{Band, Refiner};
+use super::refine::{Band, Refiner, Turns};
 use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
 use super::{Edge, VisionError};
 use crate::config::{CalibrationConfig, TrackerConfig};
@@ -51,6 +51,10 @@ pub struct CalibratedEdge {
     pub segment_px: [[f64; 2]; 2],
     /// Grey-level step across the edge.
     pub contrast: f64,
+    /// Standard error of `orientation_deg` from the reference's noise: how well the
+    /// reference fixes this edge's direction. The tracker weighs a frame's edges by it
+    /// as well as by the frame's own noise (`refine::Turns::Tied`).
+    pub orientation_sigma_deg: f64,
 }
 
 /// The calibration of one probe: the refined edges and the template built from them.
@@ -94,9 +98,10 @@ impl Calibration {
             .intersect(&coarse[GREEN].line)
             .ok_or_else(|| VisionError::Degenerate("blue and green are parallel".into()))?;
         // First pass: each edge over its followed extent, to learn the template.
-        let first = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
-        let (lines, _, blur) = fit_edges(reference, &first, BLUR0_PX)?;
-        let template = build_template(&lines, &coarse)?;
+        let followed = std::array::from_fn(|e| Some(band_for(e, &coarse[e], apex0)));
+        let first = fit_edges(reference, &followed, BLUR0_PX)?;
+        let blur = first.blur;
+        let template = build_template(&first.lines, &coarse)?;
         // Second pass on exactly the stretches the tracker fits (the template at rest),
         // so that the reference itself reads zero.
         let at_rest = Pose {
@@ -110,7 +115,12 @@ impl Calibration {
             sigma: REST_BEND_SIGMA_PX,
         };
         let second = bands(&template, &at_rest, size, blur, straight);
-        let (lines, contrast, blur) = fit_edges(reference, &second, blur)?;
+        let EdgeFits {
+            lines,
+            contrast,
+            turn_sigma,
+            blur,
+        } = fit_edges(reference, &second, blur)?;
         let template = build_template(&lines, &coarse)?;
         let edges = std::array::from_fn(|e| {
             let edge = &template.edges[e];
@@ -124,6 +134,7 @@ impl Calibration {
                 line: lines[e],
                 segment_px: [place(edge.tip_tau), place(edge.far_tau)],
                 contrast: contrast[e],
+                orientation_sigma_deg: turn_sigma[e].to_degrees(),
             }
         });
         Ok(Calibration {
@@ -159,20 +170,30 @@ impl Calibration {
     }
 }
 
-/// Each edge's own grey-level fit over `bands`: lines, contrasts and the blur.
+/// What each edge's own grey-level fit found on the reference.
+struct EdgeFits {
+    lines: [Line; 3],
+    contrast: [f64; 3],
+    /// Standard errors of the lines' rotations, radians.
+    turn_sigma: [f64; 3],
+    blur: f64,
+}
+
+/// Each edge's own grey-level fit over `bands`.
 fn fit_edges(
     reference: &GrayImage,
     bands: &[Option<Band>; 3],
     blur: f64,
-) -> Result<([Line; 3], [f64; 3], f64), VisionError> {
+) -> Result<EdgeFits, VisionError> {
     let fit = Refiner::default()
-        .fit(reference, bands, false, blur, false)
+        .fit(reference, bands, Turns::Free, blur, false)
         .ok_or_else(|| VisionError::Degenerate("the grey-level fit of the edges failed".into()))?;
     let mut lines = [Line {
         normal: [1.0, 0.0],
         rho: 0.0,
     }; 3];
     let mut contrast = [0.0; 3];
+    let mut turn_sigma = [0.0; 3];
     for e in 0..3 {
         let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
             edge: Edge::ALL[e],
@@ -180,8 +201,14 @@ fn fit_edges(
         })?;
         lines[e] = r.line;
         contrast[e] = r.contrast;
+        turn_sigma[e] = r.turn_sigma;
     }
-    Ok((lines, contrast, fit.blur))
+    Ok(EdgeFits {
+        lines,
+        contrast,
+        turn_sigma,
+        blur: fit.blur,
+    })
 }
 
 /// Which of the beam edge's two ends (positions `taus` along it, from the apex's foot)

@@ -22,7 +22,7 @@ use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::pyramid::Pyramid;
-use super::refine::{half_width, Band, FitResult, Refiner};
+use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
@@ -268,12 +268,17 @@ impl Tracker {
         // before, so the result does not depend on the order of frames.
         let blur0 = self.calibration.blur_px().max(START_BLUR_PX);
         let first = only(bands(t, &pose, size, blur0, prior), &keep);
-        let fit = self.refiner.fit(frame, &first, true, blur0, true)?;
+        let fit = self
+            .refiner
+            .fit(frame, &first, Turns::Shared, blur0, true)?;
         let blur = fit.blur.clamp(0.5, 3.0);
         let pose = refined_pose(t, &pose, &fit);
         let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
         let mut bands = only(bands(t, &pose, size, blur, prior), &keep);
-        let mut fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+        let tied = Turns::Tied(
+            Edge::ALL.map(|e| self.calibration.edge(e).orientation_sigma_deg.to_radians()),
+        );
+        let mut fit = self.refiner.fit(frame, &bands, tied, fit.blur, false)?;
         let ratio = |fit: &FitResult, e: usize| {
             fit.edges[e].map_or(0.0, |r| {
                 r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
@@ -289,7 +294,7 @@ impl Tracker {
                 keep[e] &= !weak[e];
             }
             bands = only(bands, &keep);
-            fit = self.refiner.fit(frame, &bands, true, fit.blur, false)?;
+            fit = self.refiner.fit(frame, &bands, tied, fit.blur, false)?;
         }
         let pose = refined_pose(t, &pose, &fit);
         Some((pose, fit, bands))

@@ -116,6 +116,12 @@ pub fn angle_errors(truth: &[Truth], est: &[Estimate]) -> Vec<f64> {
         .collect()
 }
 
+/// RMS of the angle errors over the frames detected with the probe in view, degrees.
+pub fn angle_rms_deg(truth: &[Truth], est: &[Estimate]) -> f64 {
+    let err = angle_errors(truth, est);
+    (err.iter().map(|e| e * e).sum::<f64>() / err.len().max(1) as f64).sqrt()
+}
+
 /// score.py's numbers for estimates in truth order (rendered sessions repeat frame
 /// names, so rows are paired by position rather than by name as the library does).
 pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {

@@ -33,7 +33,7 @@ mod gauss;
 mod kernel;
 mod solve;
 
-use solve::{apply, solve, variance, Normal};
+use solve::{apply, combination_variance, solve, variance, Normal};
 
 /// Most samples per edge (longer bands are strided), for the final and the coarse fit.
 const MAX_SAMPLES_PER_EDGE: usize = 2400;
@@ -142,6 +142,28 @@ const RED_BAND: usize = 0;
 /// distance beyond the start of the bend, pixels.
 pub const BEND_UNIT_PX: f64 = 100.0;
 
+/// How the edges' rotations are tied together in a fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Turns {
+    /// Each edge turns on its own (calibration).
+    Free,
+    /// One rotation for all edges: a rigid tip (placing the bands).
+    Shared,
+    /// Each edge turns by the tip's rotation plus its own deviation, a zero-mean one
+    /// with that edge's calibration standard error (radians, by edge index). The
+    /// reference measured each edge's orientation only that well, so a frame's edge
+    /// that agrees with the others better than its calibration should not outvote
+    /// them: the tip's rotation is the generalised least-squares mean of the edges'
+    /// own, weighted by their frame and calibration variances together, and its
+    /// standard error includes the calibration's.
+    Tied([f64; 3]),
+}
+
+/// Smallest calibration standard error of an edge's orientation that [`Turns::Tied`]
+/// takes, radians (0.001 deg): below it the tie is rigid for all purposes, and a
+/// vanishing one would make the normal equations singular.
+const MIN_TIE_SIGMA_RAD: f64 = 1.745e-5;
+
 /// What the fit found for one edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeResult {
@@ -157,15 +179,20 @@ pub struct EdgeResult {
     pub samples: usize,
     /// Rotation of this edge relative to its starting normal, radians.
     pub turn: f64,
+    /// 1-sigma uncertainty of `turn` from this frame's noise (radians; with one shared
+    /// rotation, the shared one's).
+    pub turn_sigma: f64,
 }
 
 /// Result of a fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitResult {
     pub edges: [Option<EdgeResult>; 3],
-    /// Shared rotation relative to the starting normals (tracking mode), radians.
+    /// The tip's rotation relative to the starting normals (shared or tied edges),
+    /// radians.
     pub turn: f64,
-    /// 1-sigma uncertainty of `turn` from the normal equations, radians.
+    /// 1-sigma uncertainty of `turn`, radians: from the normal equations, and with tied
+    /// edges the calibration's share as well.
     pub turn_sigma: f64,
     pub blur: f64,
     /// Bend coefficient: offset (pixels) of the beam edge from its free-end tangent at
@@ -280,16 +307,17 @@ impl EdgeFrame {
 }
 
 impl Refiner {
-    /// Fits the bands on `frame`. `shared` ties the edges to one rotation; `coarse`
+    /// Fits the bands on `frame`, the edges' rotations tied as `turns` says; `coarse`
     /// uses fewer pixels and iterations (to place the bands of the final fit).
     pub fn fit(
         &mut self,
         frame: &GrayImage,
         bands: &[Option<Band>; 3],
-        shared: bool,
+        turns: Turns,
         blur0: f64,
         coarse: bool,
     ) -> Option<FitResult> {
+        let shared = turns == Turns::Shared;
         let half_width = half_width(blur0);
         // The coarse pass starts far from the solution: its first iteration runs on
         // every other pixel. The final pass starts from the coarse lines.
@@ -335,6 +363,9 @@ impl Refiner {
             // The first iterations, far from the solution, on every other pixel.
             let step = if iter < subsampled { 2 } else { 1 };
             let mut ne = self.normal_equations(&frames, &x, &noise, shared, step);
+            if let Turns::Tied(sigma) = turns {
+                tie(&mut ne, &x, &frames, &sigma, step);
+            }
             // Expectations as observations, weighted like the pixels (whose sums the
             // normal equations hold): the physics' bend, and the slow shading.
             if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
@@ -358,14 +389,16 @@ impl Refiner {
             // The old absolute test from the first full iteration on; the relative one
             // once the robust weights have settled (see DONE_TURN_SIGMAS).
             let done = (iter > subsampled && converged(&step))
-                || (iter > subsampled + 1 && shared && converged_shared(&step, &ne));
+                || (iter > subsampled + 1
+                    && turns != Turns::Free
+                    && converged_tip(&step, &ne, &tip_weights(&frames, turns)));
             last = Some(ne);
             if done {
                 break;
             }
         }
         let ne = last?;
-        Some(self.result(&frames, &x, &ne, shared))
+        Some(self.result(&frames, &x, &ne, turns))
     }
 
     /// Adds edge `e`'s band pixels; returns how many.
@@ -574,12 +607,22 @@ impl Refiner {
         frames: &[Option<EdgeFrame>; 3],
         x: &[f64; N_PARAMS],
         ne: &Normal,
-        shared: bool,
+        turns: Turns,
     ) -> FitResult {
+        let shared = turns == Turns::Shared;
+        let weights = tip_weights(frames, turns);
         let mut edges = [None; 3];
         for (e, f) in frames.iter().enumerate() {
             let Some(f) = f else { continue };
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
+            let turn_sigma = if shared {
+                turn_sigma(ne, &weights)
+            } else {
+                ne.noise[e]
+                    * variance(&ne.h, &ne.fixed, P_TURN + e)
+                        .unwrap_or(f64::INFINITY)
+                        .sqrt()
+            };
             let normal = rotate(f.normal0, turn);
             let line = Line {
                 normal,
@@ -593,12 +636,26 @@ impl Refiner {
                 noise: ne.noise[e],
                 samples: self.ranges[e].len(),
                 turn,
+                turn_sigma,
             });
         }
+        let turn = (0..3).map(|e| weights[e] * x[P_TURN + e]).sum();
+        let turn_sigma = match turns {
+            Turns::Tied(sigma) => {
+                // The calibration's share: the edges' calibration errors, averaged with
+                // the weights that make the tip's rotation.
+                let precision: f64 = (0..3)
+                    .filter(|&e| frames[e].is_some())
+                    .map(|e| tie_sigma(&sigma, e).powi(-2))
+                    .sum();
+                turn_sigma(ne, &weights).hypot(precision.recip().sqrt())
+            }
+            _ => turn_sigma(ne, &weights),
+        };
         FitResult {
             edges,
-            turn: x[P_TURN],
-            turn_sigma: turn_sigma(ne),
+            turn,
+            turn_sigma,
             blur: x[P_BLUR],
             bend: x[P_BEND],
         }
@@ -632,25 +689,97 @@ fn converged(step: &[f64; N_PARAMS]) -> bool {
         && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_OFFSET_PX)
 }
 
-/// Whether `step`, computed from `ne`, moved the shared rotation by at most
-/// [`DONE_TURN_SIGMAS`] of its standard error and the offsets less than
-/// [`DONE_SHARED_OFFSET_PX`].
-fn converged_shared(step: &[f64; N_PARAMS], ne: &Normal) -> bool {
+/// Whether `step`, computed from `ne`, moved the tip's rotation (the rotations
+/// combined with `weights`) by at most [`DONE_TURN_SIGMAS`] of its standard error from
+/// this frame's noise and the offsets less than [`DONE_SHARED_OFFSET_PX`].
+fn converged_tip(step: &[f64; N_PARAMS], ne: &Normal, weights: &[f64; N_PARAMS]) -> bool {
+    let turn: f64 = weights.iter().zip(step).map(|(w, s)| w * s).sum();
     (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_SHARED_OFFSET_PX)
-        && step[P_TURN].abs() <= DONE_TURN_SIGMAS * turn_sigma(ne)
+        && turn.abs() <= DONE_TURN_SIGMAS * turn_sigma(ne, weights)
 }
 
-/// 1-sigma uncertainty of the shared rotation from the normal equations `ne` (infinite
-/// when they do not determine it).
-fn turn_sigma(ne: &Normal) -> f64 {
-    let noise = ne
-        .noise
+/// The largest noise of the edges in view: the unit of the pixel sums' normal
+/// equations for the parameters all edges share.
+fn common_noise(ne: &Normal) -> f64 {
+    ne.noise
         .iter()
         .copied()
         .filter(|n| n.is_finite())
-        .fold(0.0, f64::max);
-    let var = variance(&ne.h, &ne.fixed, P_TURN).unwrap_or(f64::INFINITY);
-    noise * var.sqrt()
+        .fold(0.0, f64::max)
+}
+
+/// 1-sigma uncertainty, from the normal equations `ne`, of the tip's rotation: the
+/// rotation parameters combined with `weights` (infinite when they do not determine
+/// it).
+fn turn_sigma(ne: &Normal, weights: &[f64; N_PARAMS]) -> f64 {
+    let var = combination_variance(&ne.h, &ne.fixed, weights).unwrap_or(f64::INFINITY);
+    common_noise(ne) * var.sqrt()
+}
+
+/// Edge `e`'s calibration standard error as the tie takes it (radians).
+fn tie_sigma(sigma: &[f64; 3], e: usize) -> f64 {
+    if sigma[e].is_finite() {
+        sigma[e].max(MIN_TIE_SIGMA_RAD)
+    } else {
+        MIN_TIE_SIGMA_RAD
+    }
+}
+
+/// The weights over the parameters that make the tip's rotation: the shared rotation,
+/// or with tied edges the mean of the edges' rotations weighted by their calibration
+/// precision (the generalised least-squares estimate of the tip's rotation; see
+/// [`Turns::Tied`]). Free edges: the first edge in view's rotation.
+fn tip_weights(frames: &[Option<EdgeFrame>; 3], turns: Turns) -> [f64; N_PARAMS] {
+    let mut w = [0.0; N_PARAMS];
+    match turns {
+        Turns::Shared => w[P_TURN] = 1.0,
+        Turns::Tied(sigma) => {
+            let in_view = || (0..3).filter(|&e| frames[e].is_some());
+            let total: f64 = in_view().map(|e| tie_sigma(&sigma, e).powi(-2)).sum();
+            for e in in_view() {
+                w[P_TURN + e] = tie_sigma(&sigma, e).powi(-2) / total;
+            }
+        }
+        Turns::Free => {
+            if let Some(e) = (0..3).find(|&e| frames[e].is_some()) {
+                w[P_TURN + e] = 1.0;
+            }
+        }
+    }
+    w
+}
+
+/// Adds the tie of [`Turns::Tied`] to the normal equations: each edge's rotation
+/// deviates from the tip's (their precision-weighted mean) with its calibration
+/// standard error. The tip's rotation itself is eliminated, which leaves the prior
+/// precision `a_i delta_ij - a_i a_j / A` (a_i = sigma_i^-2, A their sum) on the edges'
+/// rotations: free along a common turn, stiff against the edges disagreeing.
+fn tie(
+    ne: &mut Normal,
+    x: &[f64; N_PARAMS],
+    frames: &[Option<EdgeFrame>; 3],
+    sigma: &[f64; 3],
+    step: usize,
+) {
+    let noise = common_noise(ne);
+    let a: [f64; 3] = std::array::from_fn(|e| {
+        if frames[e].is_some() {
+            pixel_weight(noise, tie_sigma(sigma, e), step)
+        } else {
+            0.0
+        }
+    });
+    let total: f64 = a.iter().sum();
+    if total <= 0.0 || !total.is_finite() {
+        return;
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            let p = if i == j { a[i] } else { 0.0 } - a[i] * a[j] / total;
+            ne.h[P_TURN + i][P_TURN + j] += p;
+            ne.g[P_TURN + i] -= p * x[P_TURN + j];
+        }
+    }
 }
 
 /// Half-width of the band of pixels fitted around an edge, for a blur (pixels).
@@ -696,7 +825,7 @@ mod tests {
         };
         let mut r = Refiner::default();
         let fit = r
-            .fit(&img, &[None, Some(band), None], false, 1.0, false)
+            .fit(&img, &[None, Some(band), None], Turns::Free, 1.0, false)
             .unwrap();
         let e = fit.edges[1].unwrap();
         let got = e.line.normal[1].atan2(e.line.normal[0]);
@@ -712,5 +841,86 @@ mod tests {
         let p = e.line.foot([100.0, 60.0]);
         assert!(truth.depth(p).abs() < 0.02, "{}", truth.depth(p));
         assert!((e.contrast - 150.0).abs() < 2.0 && (fit.blur - 1.2).abs() < 0.1);
+    }
+
+    /// A bright strip between two edges, each turned by its own angle (radians) from
+    /// horizontal, noise-free: the top edge at y = 50 and the bottom one at y = 110
+    /// (at x = 100).
+    fn strip(top: f64, bottom: f64, blur: f64) -> GrayImage {
+        GrayImage::from_fn(200, 160, |x, y| {
+            let (x, y) = (x as f64 - 100.0, y as f64);
+            let below_top = y - 50.0 - x * top.tan();
+            let above_bottom = 110.0 + x * bottom.tan() - y;
+            let inside = normal_cdf(below_top / blur) + normal_cdf(above_bottom / blur) - 1.0;
+            Luma([(60.0 + 150.0 * inside).round() as u8])
+        })
+    }
+
+    fn strip_bands() -> [Option<Band>; 3] {
+        let band = |rho: f64, normal: [f64; 2]| {
+            let line = Line { normal, rho };
+            Some(Band {
+                start: line.foot([20.0, rho.abs()]),
+                end: line.foot([180.0, rho.abs()]),
+                line,
+                bend_from: None,
+                bend0: 0.0,
+                bend_sigma: f64::INFINITY,
+                partner: None,
+                base: None,
+            })
+        };
+        // Inward normals: down from the top edge, up from the bottom one.
+        [None, band(50.0, [0.0, 1.0]), band(-110.0, [0.0, -1.0])]
+    }
+
+    #[test]
+    fn tied_edges_give_the_calibration_weighted_mean_and_its_error() {
+        // The two edges disagree by 0.2 deg, more than either frame measurement's error:
+        // with calibration errors of 0.1 and 0.01 deg the tip turns (nearly) with the
+        // better-calibrated edge, by the generalised least-squares mean, and its
+        // standard error is at least the calibration's share.
+        let (top, bottom) = (0.2f64.to_radians(), 0.0);
+        let img = strip(top, bottom, 1.0);
+        let sigma = [f64::NAN, 0.1f64.to_radians(), 0.01f64.to_radians()];
+        let fit = Refiner::default()
+            .fit(&img, &strip_bands(), Turns::Tied(sigma), 1.0, false)
+            .unwrap();
+        // The frame measures each edge to a few thousandths of a degree here, so the
+        // tie hardly moves them, and the tip's turn is their calibration-weighted mean.
+        let [_, Some(b), Some(g)] = fit.edges else {
+            panic!("both edges fitted")
+        };
+        assert!(
+            (b.turn - top).abs().to_degrees() < 0.01,
+            "{}",
+            b.turn.to_degrees()
+        );
+        assert!(
+            (g.turn - bottom).abs().to_degrees() < 0.01,
+            "{}",
+            g.turn.to_degrees()
+        );
+        let (wb, wg) = (sigma[1].powi(-2), sigma[2].powi(-2));
+        let expected = (wb * b.turn + wg * g.turn) / (wb + wg);
+        assert!(
+            (fit.turn - expected).abs() < 1e-9,
+            "{} {}",
+            fit.turn,
+            expected
+        );
+        let calibration_share = (wb + wg).recip().sqrt();
+        assert!(fit.turn_sigma >= calibration_share);
+        assert!(
+            fit.turn_sigma < 1.1 * calibration_share,
+            "{}",
+            fit.turn_sigma
+        );
+        // Shared, the same edges are forced to one rotation between the two.
+        let shared = Refiner::default()
+            .fit(&img, &strip_bands(), Turns::Shared, 1.0, false)
+            .unwrap();
+        let mid = shared.turn.to_degrees();
+        assert!(mid > 0.05 && mid < 0.15, "{mid}");
     }
 }

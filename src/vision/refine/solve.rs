@@ -75,6 +75,17 @@ pub(super) fn variance(
     Some(x[k].max(0.0))
 }
 
+/// Variance factor of the combination `w . x` of the parameters (w^T H^-1 w), free
+/// parameters only.
+pub(super) fn combination_variance(
+    h: &[[f64; N_PARAMS]; N_PARAMS],
+    fixed: &[bool; N_PARAMS],
+    w: &[f64; N_PARAMS],
+) -> Option<f64> {
+    let x = solve(h, w, fixed)?;
+    Some(w.iter().zip(&x).map(|(a, b)| a * b).sum::<f64>().max(0.0))
+}
+
 /// In-place Cholesky solve of a symmetric positive semi-definite system; a parameter
 /// whose pivot vanishes (dependent on the others) is held at a zero step.
 #[allow(clippy::needless_range_loop)]
