@@ -28,9 +28,8 @@ the replay.\n\n\
 CSV columns: frame (file name), detected (1/0), angle_deg (tip rotation from the \
 reference, CCW on screen), force_nN (signed as the angle), tip_x, tip_y (the apex, pixels; \
 x right, y down) - empty when not detected - then confidence, angle_sigma_deg (the angle's \
-standard error from the frame's noise; measured on rendered frames, calibration and model \
-error add about 0.008 deg on clean frames, and errors run 1.2-1.4 times it on noisy and \
-cluttered ones), scale (frame pixels per \
+standard error from the frame's noise and the calibration's; on rendered frames the errors \
+run 1.07-1.14 times it on every look), scale (frame pixels per \
 reference pixel), force_saturated, red/blue/green_support (edge pixels), px_per_um, \
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \

@@ -123,7 +123,8 @@ pub struct Estimate {
     pub apex_px: Option<[f64; 2]>,
     /// Per edge, indexed by [`Edge::index`].
     pub edges: [Option<EdgeFit>; 3],
-    /// Standard error of `angle_deg` from the fit's noise, degrees.
+    /// Standard error of `angle_deg` from the frame's noise and the calibration's (each
+    /// edge's orientation on the reference), degrees.
     pub angle_sigma_deg: Option<f64>,
     /// Frame pixels per reference pixel.
     pub scale: Option<f64>,
