@@ -71,8 +71,7 @@ pub(super) fn variance(
 ) -> Option<f64> {
     let mut e = [0.0; N_PARAMS];
     e[k] = 1.0;
-    let x = solve(h, &e, fixed)?;
-    Some(x[k].max(0.0))
+    combination_variance(h, fixed, &e)
 }
 
 /// Variance factor of the combination `w . x` of the parameters (w^T H^-1 w), free
