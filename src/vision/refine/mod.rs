@@ -802,6 +802,21 @@ mod tests {
         })
     }
 
+    /// A band along `line` from x = 20 to x = 180 (feet of the points at height `y`), no
+    /// bend and no neighbouring faces.
+    fn straight_band(line: Line, y: f64) -> Band {
+        Band {
+            start: line.foot([20.0, y]),
+            end: line.foot([180.0, y]),
+            line,
+            bend_from: None,
+            bend0: 0.0,
+            bend_sigma: f64::INFINITY,
+            partner: None,
+            base: None,
+        }
+    }
+
     #[test]
     fn recovers_a_tilted_edge_to_a_hundredth_of_a_pixel() {
         let angle = 100f64.to_radians();
@@ -813,16 +828,7 @@ mod tests {
             normal: n0,
             rho: 60.7,
         };
-        let band = Band {
-            start: line.foot([20.0, 70.0]),
-            end: line.foot([180.0, 70.0]),
-            line,
-            bend_from: None,
-            bend0: 0.0,
-            bend_sigma: f64::INFINITY,
-            partner: None,
-            base: None,
-        };
+        let band = straight_band(line, 70.0);
         let mut r = Refiner::default();
         let fit = r
             .fit(&img, &[None, Some(band), None], Turns::Free, 1.0, false)
@@ -857,19 +863,8 @@ mod tests {
     }
 
     fn strip_bands() -> [Option<Band>; 3] {
-        let band = |rho: f64, normal: [f64; 2]| {
-            let line = Line { normal, rho };
-            Some(Band {
-                start: line.foot([20.0, rho.abs()]),
-                end: line.foot([180.0, rho.abs()]),
-                line,
-                bend_from: None,
-                bend0: 0.0,
-                bend_sigma: f64::INFINITY,
-                partner: None,
-                base: None,
-            })
-        };
+        let band =
+            |rho: f64, normal: [f64; 2]| Some(straight_band(Line { normal, rho }, rho.abs()));
         // Inward normals: down from the top edge, up from the bottom one.
         [None, band(50.0, [0.0, 1.0]), band(-110.0, [0.0, -1.0])]
     }
