@@ -4,8 +4,9 @@
 //! noise and the calibration's (`angle_sigma_deg`), scale, the edges' support, the SEM's
 //! scale from the frame's metadata (`px_per_um`, `magnification`, the apex in
 //! micrometres: empty without metadata), the found edge segments
-//! (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for pictures) and `miss`. Without timing the file is a pure function
-//! of the frames and the configuration: a replay run twice gives byte-identical output.
+//! (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for pictures) and `miss`.
+//! Without timing the file is a pure function of the frames and the configuration: a
+//! replay run twice gives byte-identical output.
 //! [`read_results`] reads it back (for `report`).
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};

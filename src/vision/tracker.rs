@@ -96,6 +96,8 @@ pub struct Tracker {
     threshold: Threshold,
     window_rad: f64,
     calibration: Calibration,
+    /// The final fits' tie between the edges: each by its calibration error.
+    tied: Turns,
     cantilever: Option<Cantilever>,
     coherence: bool,
     last: Option<Last>,
@@ -114,10 +116,13 @@ impl Tracker {
         calibration: Calibration,
         cantilever: Option<Cantilever>,
     ) -> Tracker {
+        let tied =
+            Turns::Tied(Edge::ALL.map(|e| calibration.edge(e).orientation_sigma_deg.to_radians()));
         Tracker {
             threshold: cfg.threshold,
             window_rad: cfg.window_deg.to_radians(),
             calibration,
+            tied,
             cantilever,
             coherence: true,
             last: None,
@@ -275,10 +280,9 @@ impl Tracker {
         let pose = refined_pose(t, &pose, &fit);
         let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
         let mut bands = only(bands(t, &pose, size, blur, prior), &keep);
-        let tied = Turns::Tied(
-            Edge::ALL.map(|e| self.calibration.edge(e).orientation_sigma_deg.to_radians()),
-        );
-        let mut fit = self.refiner.fit(frame, &bands, tied, fit.blur, false)?;
+        let mut fit = self
+            .refiner
+            .fit(frame, &bands, self.tied, fit.blur, false)?;
         let ratio = |fit: &FitResult, e: usize| {
             fit.edges[e].map_or(0.0, |r| {
                 r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
@@ -294,7 +298,9 @@ impl Tracker {
                 keep[e] &= !weak[e];
             }
             bands = only(bands, &keep);
-            fit = self.refiner.fit(frame, &bands, tied, fit.blur, false)?;
+            fit = self
+                .refiner
+                .fit(frame, &bands, self.tied, fit.blur, false)?;
         }
         let pose = refined_pose(t, &pose, &fit);
         Some((pose, fit, bands))

@@ -356,6 +356,7 @@ impl Refiner {
         x[P_BLUR] = blur0;
         x[P_BEND] = bands[RED_BAND].map_or(0.0, |b| b.bend0);
         self.init_photometry(&frames, &mut x);
+        let weights = tip_weights(&frames, turns);
         let mut noise = [f64::INFINITY; 3];
         let mut last = None;
         self.stretches.ok = [true; 3 * CHUNKS_PER_EDGE];
@@ -391,14 +392,14 @@ impl Refiner {
             let done = (iter > subsampled && converged(&step))
                 || (iter > subsampled + 1
                     && turns != Turns::Free
-                    && converged_tip(&step, &ne, &tip_weights(&frames, turns)));
+                    && converged_tip(&step, &ne, &weights));
             last = Some(ne);
             if done {
                 break;
             }
         }
         let ne = last?;
-        Some(self.result(&frames, &x, &ne, turns))
+        Some(self.result(&frames, &x, &ne, turns, &weights))
     }
 
     /// Adds edge `e`'s band pixels; returns how many.
@@ -608,15 +609,15 @@ impl Refiner {
         x: &[f64; N_PARAMS],
         ne: &Normal,
         turns: Turns,
+        weights: &[f64; N_PARAMS],
     ) -> FitResult {
         let shared = turns == Turns::Shared;
-        let weights = tip_weights(frames, turns);
         let mut edges = [None; 3];
         for (e, f) in frames.iter().enumerate() {
             let Some(f) = f else { continue };
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
             let turn_sigma = if shared {
-                turn_sigma(ne, &weights)
+                turn_sigma(ne, weights)
             } else {
                 ne.noise[e]
                     * variance(&ne.h, &ne.fixed, P_TURN + e)
@@ -648,9 +649,9 @@ impl Refiner {
                     .filter(|&e| frames[e].is_some())
                     .map(|e| tie_sigma(&sigma, e).powi(-2))
                     .sum();
-                turn_sigma(ne, &weights).hypot(precision.recip().sqrt())
+                turn_sigma(ne, weights).hypot(precision.recip().sqrt())
             }
-            _ => turn_sigma(ne, &weights),
+            _ => turn_sigma(ne, weights),
         };
         FitResult {
             edges,
