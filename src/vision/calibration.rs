@@ -186,7 +186,7 @@ fn fit_edges(
     blur: f64,
 ) -> Result<EdgeFits, VisionError> {
     let fit = Refiner::default()
-        .fit(reference, bands, Turns::Free, blur, false)
+        .fit(reference, bands, Turns::Free, blur, None, false)
         .ok_or_else(|| VisionError::Degenerate("the grey-level fit of the edges failed".into()))?;
     let mut lines = [Line {
         normal: [1.0, 0.0],
