@@ -409,7 +409,8 @@ fn thread_cpu_s() -> f64 {
 /// Tracking CPU time per frame on the bench's frames, measured as thread CPU time so
 /// that a busy machine does not inflate it (criterion's wall-clock medians do). A
 /// measuring tool for docs/tracker.md: `cargo test --release --test tracker_rendered
-/// cpu_time -- --ignored --nocapture`.
+/// cpu_time -- --ignored --nocapture`. `CPU_TIME_TRACKS=8` tracks each frame 8 times
+/// instead of 400, for counting instructions under callgrind (docs/performance.md).
 #[test]
 #[ignore]
 fn cpu_time_per_frame() {
@@ -437,7 +438,10 @@ fn cpu_time_per_frame() {
             spec.blank = blank;
             let img = render(&spec).0;
             assert_eq!(tracker.track(&img).detected, !blank);
-            let n = 400;
+            let n: usize = std::env::var("CPU_TIME_TRACKS")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(400);
             let t0 = thread_cpu_s();
             for _ in 0..n {
                 std::hint::black_box(tracker.track(&img));
