@@ -368,8 +368,10 @@ impl Refiner {
         // Infinite noise: no robust weights until the residuals have been seen.
         let mut noise = noise0.unwrap_or([f64::INFINITY; 3]);
         // Iterations the robust weights take to settle after the outlier stretches are
-        // rejected (see DONE_TURN_SIGMAS).
-        let settling = if noise0.is_some() { 0 } else { 1 };
+        // rejected (see DONE_TURN_SIGMAS): none when every edge starts from a measured
+        // noise (an edge the earlier fit did not have starts unweighted).
+        let measured = (0..3).all(|e| frames[e].is_none() || noise[e].is_finite());
+        let settling = if measured { 0 } else { 1 };
         let mut last = None;
         self.stretches.ok = [true; 3 * CHUNKS_PER_EDGE];
         for iter in 0..iterations_max {
