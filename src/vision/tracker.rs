@@ -281,7 +281,8 @@ impl Tracker {
         let prior = bend_prior(t, &pose, self.cantilever, fit.bend);
         let mut bands = only(bands(t, &pose, size, blur, prior), &keep);
         // The final fit starts from the coarse pass's noise, so its first iteration
-        // already weights the residuals robustly (about 15 % fewer iterations).
+        // already weights the residuals robustly (and the fit may stop an iteration
+        // sooner).
         let noise = |fit: &FitResult| Some(fit.edges.map(|r| r.map_or(f64::INFINITY, |r| r.noise)));
         let mut fit = self
             .refiner
