@@ -283,10 +283,9 @@ impl Tracker {
         // The final fit starts from the coarse pass's noise, so its first iteration
         // already weights the residuals robustly (and the fit may stop an iteration
         // sooner).
-        let noise = |fit: &FitResult| Some(fit.edges.map(|r| r.map_or(f64::INFINITY, |r| r.noise)));
-        let mut fit = self
-            .refiner
-            .fit(frame, &bands, self.tied, fit.blur, noise(&fit), false)?;
+        let mut fit =
+            self.refiner
+                .fit(frame, &bands, self.tied, fit.blur, Some(fit.noise()), false)?;
         let ratio = |fit: &FitResult, e: usize| {
             fit.edges[e].map_or(0.0, |r| {
                 r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
@@ -304,7 +303,7 @@ impl Tracker {
             bands = only(bands, &keep);
             fit = self
                 .refiner
-                .fit(frame, &bands, self.tied, fit.blur, noise(&fit), false)?;
+                .fit(frame, &bands, self.tied, fit.blur, Some(fit.noise()), false)?;
         }
         let pose = refined_pose(t, &pose, &fit);
         Some((pose, fit, bands))

@@ -208,6 +208,14 @@ pub struct FitResult {
     pub bend: f64,
 }
 
+impl FitResult {
+    /// Each edge's residual noise (infinite where no edge was fitted): what a later fit
+    /// of the same frame starts from (`noise0` of [`Refiner::fit`]).
+    pub fn noise(&self) -> [f64; 3] {
+        self.edges.map(|r| r.map_or(f64::INFINITY, |r| r.noise))
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 struct Sample {
     x: f32,
@@ -630,12 +638,14 @@ impl Refiner {
         weights: &[f64; N_PARAMS],
     ) -> FitResult {
         let shared = turns == Turns::Shared;
+        // The tip's rotation's uncertainty from this frame's noise (one solve).
+        let tip_sigma = turn_sigma(ne, weights);
         let mut edges = [None; 3];
         for (e, f) in frames.iter().enumerate() {
             let Some(f) = f else { continue };
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
             let turn_sigma = if shared {
-                turn_sigma(ne, weights)
+                tip_sigma
             } else {
                 ne.noise[e]
                     * variance(&ne.h, &ne.fixed, P_TURN + e)
@@ -660,16 +670,10 @@ impl Refiner {
         }
         let turn = (0..3).map(|e| weights[e] * x[P_TURN + e]).sum();
         let turn_sigma = match turns {
-            Turns::Tied(sigma) => {
-                // The calibration's share: the edges' calibration errors, averaged with
-                // the weights that make the tip's rotation.
-                let precision: f64 = (0..3)
-                    .filter(|&e| frames[e].is_some())
-                    .map(|e| tie_sigma(&sigma, e).powi(-2))
-                    .sum();
-                turn_sigma(ne, weights).hypot(precision.recip().sqrt())
-            }
-            _ => turn_sigma(ne, weights),
+            // The calibration's share: the edges' calibration errors, averaged with the
+            // weights that make the tip's rotation.
+            Turns::Tied(sigma) => tip_sigma.hypot(tie_precision(frames, &sigma).recip().sqrt()),
+            _ => tip_sigma,
         };
         FitResult {
             edges,
@@ -744,6 +748,15 @@ fn tie_sigma(sigma: &[f64; 3], e: usize) -> f64 {
     }
 }
 
+/// The calibration's precision of the tip's rotation with tied edges: the sum of the
+/// edges in view's calibration precisions (radians^-2).
+fn tie_precision(frames: &[Option<EdgeFrame>; 3], sigma: &[f64; 3]) -> f64 {
+    (0..3)
+        .filter(|&e| frames[e].is_some())
+        .map(|e| tie_sigma(sigma, e).powi(-2))
+        .sum()
+}
+
 /// The weights over the parameters that make the tip's rotation: the shared rotation,
 /// or with tied edges the mean of the edges' rotations weighted by their calibration
 /// precision (the generalised least-squares estimate of the tip's rotation; see
@@ -753,9 +766,8 @@ fn tip_weights(frames: &[Option<EdgeFrame>; 3], turns: Turns) -> [f64; N_PARAMS]
     match turns {
         Turns::Shared => w[P_TURN] = 1.0,
         Turns::Tied(sigma) => {
-            let in_view = || (0..3).filter(|&e| frames[e].is_some());
-            let total: f64 = in_view().map(|e| tie_sigma(&sigma, e).powi(-2)).sum();
-            for e in in_view() {
+            let total = tie_precision(frames, &sigma);
+            for e in (0..3).filter(|&e| frames[e].is_some()) {
                 w[P_TURN + e] = tie_sigma(&sigma, e).powi(-2) / total;
             }
         }
@@ -976,7 +988,7 @@ mod tests {
         let cold = Refiner::default()
             .fit(&img, &strip_bands(), Turns::Tied(sigma), 1.0, None, false)
             .unwrap();
-        let noise = cold.edges.map(|e| e.map_or(f64::INFINITY, |e| e.noise));
+        let noise = cold.noise();
         assert!(noise[1] > 20.0 && noise[1] < 30.0, "{noise:?}");
         let warm = Refiner::default()
             .fit(
