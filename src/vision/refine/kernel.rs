@@ -56,7 +56,8 @@ impl Refiner {
                 along: along(normals[e]),
                 offset: x[P_OFFSET + e],
                 bend: x[P_BEND],
-                blur,
+                inv_blur: 1.0 / blur,
+                corner_t: dot(along(normals[e]), sub(f.corner, f.origin)),
                 photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
                 huber: 1.5 * noise[e],
             };
@@ -140,7 +141,10 @@ struct EdgeParams {
     along: [f64; 2],
     offset: f64,
     bend: f64,
-    blur: f64,
+    /// 1 / blur (pixels).
+    inv_blur: f64,
+    /// Where along the edge (from its origin, pixels) a curved edge starts to bend.
+    corner_t: f64,
     /// level, level slope, contrast, contrast slope
     photo: [f64; 4],
     /// Huber threshold on the residual, grey levels.
@@ -172,14 +176,13 @@ fn accumulate_edge_body(
 ) -> EdgeSums {
     let mut acc = Accumulator::default();
     let (mut sq, mut wsum) = (0.0, 0.0);
-    let inv_blur = 1.0 / p.blur;
-    let corner_t = dot(p.along, sub(f.corner, f.origin));
     let table = cdf_table();
     let mut batch = Batch::default();
     let mut lanes = StretchLanes::default();
+    let mut m = ModelLanes::default();
     for first in (0..samples.len()).step_by(LANES * step) {
         batch.fill(samples, first, step);
-        let m = batch.model(table, f, p, inv_blur, corner_t, &st.level);
+        batch.model(table, f, p, &st.level, &mut m);
         let all_ok = batch.sums(&m, st, &mut lanes, &mut sq, &mut wsum);
         if all_ok && acc.lane == 0 {
             // The common case: the batch's lanes are the accumulator's.
@@ -407,6 +410,7 @@ struct Batch {
 
 /// The residuals of a [`Batch`]'s samples and what they add to the normal equations,
 /// lane by lane (see the module `refine` for the model).
+#[derive(Default)]
 struct ModelLanes {
     r: [f64; LANES],
     /// Squared residual, robust (Huber) weight, weighted squared residual.
@@ -511,10 +515,9 @@ impl Batch {
         table: &CdfTable,
         f: &EdgeFrame,
         p: &EdgeParams,
-        inv_blur: f64,
-        corner_t: f64,
         levels: &[f64],
-    ) -> ModelLanes {
+        m: &mut ModelLanes,
+    ) {
         let mut u = [0.0; LANES];
         let mut w3 = [0.0; LANES];
         let mut z = [0.0; LANES];
@@ -523,24 +526,16 @@ impl Batch {
             let rel = [self.x[l] - f.origin[0], self.y[l] - f.origin[1]];
             u[l] = p.along[0] * rel[0] + p.along[1] * rel[1];
             let w = if f.curved {
-                (f.towards * (u[l] - corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
+                (f.towards * (u[l] - p.corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
             } else {
                 0.0
             };
             w3[l] = w * w * w;
             let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3[l];
-            z[l] = d * inv_blur;
+            z[l] = d * p.inv_blur;
             un[l] = u[l] * (1.0 / ALONG_UNIT_PX);
         }
         let (cdf, pdf) = cdf_pdf_lanes(table, &z);
-        let mut m = ModelLanes {
-            r: [0.0; LANES],
-            r2: [0.0; LANES],
-            weight: [0.0; LANES],
-            wr2: [0.0; LANES],
-            jac: [[0.0; LANES]; 8],
-            q: [0.0; LANES],
-        };
         for l in 0..LANES {
             let contrast = p.photo[2] + p.photo[3] * un[l];
             let level = levels[self.chunk[l]];
@@ -554,13 +549,12 @@ impl Batch {
             };
             (m.r[l], m.r2[l], m.weight[l], m.wr2[l]) = (r, r * r, weight, weight * r * r);
             m.q[l] = q;
-            let dd = (contrast - level) * pdf[l] * inv_blur;
+            let dd = (contrast - level) * pdf[l] * p.inv_blur;
             let (u, w3, z, un, cdf) = (u[l], w3[l], z[l], un[l], cdf[l]);
             let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
             for (ja, v) in m.jac.iter_mut().zip(jac) {
                 ja[l] = v;
             }
         }
-        m
     }
 }
