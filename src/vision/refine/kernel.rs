@@ -518,43 +518,56 @@ impl Batch {
         levels: &[f64],
         m: &mut ModelLanes,
     ) {
-        let mut u = [0.0; LANES];
-        let mut w3 = [0.0; LANES];
-        let mut z = [0.0; LANES];
-        let mut un = [0.0; LANES];
-        for l in 0..LANES {
-            let rel = [self.x[l] - f.origin[0], self.y[l] - f.origin[1]];
-            u[l] = p.along[0] * rel[0] + p.along[1] * rel[1];
-            let w = if f.curved {
-                (f.towards * (u[l] - p.corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX)
-            } else {
-                0.0
-            };
-            w3[l] = w * w * w;
-            let d = p.normal[0] * rel[0] + p.normal[1] * rel[1] - p.offset - p.bend * w3[l];
-            z[l] = d * p.inv_blur;
-            un[l] = u[l] * (1.0 / ALONG_UNIT_PX);
-        }
+        use std::array::from_fn;
+        // One simple loop per quantity (each becomes vector arithmetic; as one loop
+        // with a branch inside, the compiler left it scalar). Every lane computes what
+        // a sample at a time did, in the same order.
+        let rx: [f64; LANES] = from_fn(|l| self.x[l] - f.origin[0]);
+        let ry: [f64; LANES] = from_fn(|l| self.y[l] - f.origin[1]);
+        let u: [f64; LANES] = from_fn(|l| p.along[0] * rx[l] + p.along[1] * ry[l]);
+        let w3: [f64; LANES] = if f.curved {
+            from_fn(|l| {
+                let w = (f.towards * (u[l] - p.corner_t)).max(0.0) * (1.0 / BEND_UNIT_PX);
+                w * w * w
+            })
+        } else {
+            [0.0; LANES]
+        };
+        let z: [f64; LANES] = from_fn(|l| {
+            let d = p.normal[0] * rx[l] + p.normal[1] * ry[l] - p.offset - p.bend * w3[l];
+            d * p.inv_blur
+        });
+        let un: [f64; LANES] = from_fn(|l| u[l] * (1.0 / ALONG_UNIT_PX));
         let (cdf, pdf) = cdf_pdf_lanes(table, &z);
-        for l in 0..LANES {
-            let contrast = p.photo[2] + p.photo[3] * un[l];
-            let level = levels[self.chunk[l]];
-            let q = 1.0 - cdf[l];
-            let r =
-                self.value[l] - (p.photo[0] + p.photo[1] * un[l] + contrast * cdf[l] + level * q);
-            let weight = if r.abs() <= p.huber {
+        let level: [f64; LANES] = from_fn(|l| levels[self.chunk[l]]);
+        let contrast: [f64; LANES] = from_fn(|l| p.photo[2] + p.photo[3] * un[l]);
+        let q: [f64; LANES] = from_fn(|l| 1.0 - cdf[l]);
+        let r: [f64; LANES] = from_fn(|l| {
+            self.value[l]
+                - (p.photo[0] + p.photo[1] * un[l] + contrast[l] * cdf[l] + level[l] * q[l])
+        });
+        let weight: [f64; LANES] = from_fn(|l| {
+            if r[l].abs() <= p.huber {
                 1.0
             } else {
-                p.huber / r.abs()
-            };
-            (m.r[l], m.r2[l], m.weight[l], m.wr2[l]) = (r, r * r, weight, weight * r * r);
-            m.q[l] = q;
-            let dd = (contrast - level) * pdf[l] * p.inv_blur;
-            let (u, w3, z, un, cdf) = (u[l], w3[l], z[l], un[l], cdf[l]);
-            let jac = [-dd * u, -dd, -dd * w3, -dd * z, 1.0, un, cdf, cdf * un];
-            for (ja, v) in m.jac.iter_mut().zip(jac) {
-                ja[l] = v;
+                p.huber / r[l].abs()
             }
-        }
+        });
+        let dd: [f64; LANES] = from_fn(|l| (contrast[l] - level[l]) * pdf[l] * p.inv_blur);
+        m.r = r;
+        m.r2 = from_fn(|l| r[l] * r[l]);
+        m.weight = weight;
+        m.wr2 = from_fn(|l| weight[l] * r[l] * r[l]);
+        m.q = q;
+        m.jac = [
+            from_fn(|l| -dd[l] * u[l]),
+            from_fn(|l| -dd[l]),
+            from_fn(|l| -dd[l] * w3[l]),
+            from_fn(|l| -dd[l] * z[l]),
+            [1.0; LANES],
+            un,
+            cdf,
+            from_fn(|l| cdf[l] * un[l]),
+        ];
     }
 }
