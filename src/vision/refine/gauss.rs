@@ -54,34 +54,38 @@ fn cdf_pdf(z: f64) -> (f64, f64) {
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
 pub(super) fn cdf_pdf_lanes(table: &CdfTable, z: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    use std::array::from_fn;
     let table = &table.0;
-    let pos = z.map(|z| (z + CDF_RANGE) * CDF_STEPS);
-    let (mut a, mut b) = ([[0.0; 2]; 4], [[0.0; 2]; 4]);
-    let mut t = [0.0; 4];
+    // One simple loop per quantity, so that each becomes vector arithmetic (only the
+    // look-ups go lane by lane).
+    let pos: [f64; 4] = from_fn(|l| (z[l] + CDF_RANGE) * CDF_STEPS);
     // The node below each value, clamped to the table (out of its range the node does
     // not matter: the value is replaced below), is truncated in range, and the same
     // as clamping after the truncation.
     let k = pos.map(|p| p.max(0.0).min((CDF_NODES - 2) as f64) as i32 as usize);
-    for l in 0..4 {
-        (a[l], b[l]) = (table[k[l]], table[k[l] + 1]);
-        t[l] = pos[l] - k[l] as f64;
-    }
-    let (mut cdf, mut pdf) = ([0.0; 4], [0.0; 4]);
+    let a: [[f64; 2]; 4] = from_fn(|l| table[k[l]]);
+    let b: [[f64; 2]; 4] = from_fn(|l| table[k[l] + 1]);
+    let t: [f64; 4] = from_fn(|l| pos[l] - k[l] as f64);
     let h = 1.0 / CDF_STEPS;
-    for l in 0..4 {
+    let cdf: [f64; 4] = from_fn(|l| {
         let (a, b, t) = (a[l], b[l], t[l]);
         let (t2, t3) = (t * t, t * t * t);
-        cdf[l] = (2.0 * t3 - 3.0 * t2 + 1.0) * a[0]
+        (2.0 * t3 - 3.0 * t2 + 1.0) * a[0]
             + (t3 - 2.0 * t2 + t) * h * a[1]
             + (-2.0 * t3 + 3.0 * t2) * b[0]
-            + (t3 - t2) * h * b[1];
-        pdf[l] = a[1] + t * (b[1] - a[1]);
-        if pos[l] <= 0.0 {
-            (cdf[l], pdf[l]) = (0.0, 0.0);
-        } else if pos[l] >= (CDF_NODES - 1) as f64 {
-            (cdf[l], pdf[l]) = (1.0, 0.0);
-        }
-    }
+            + (t3 - t2) * h * b[1]
+    });
+    let pdf: [f64; 4] = from_fn(|l| a[l][1] + t[l] * (b[l][1] - a[l][1]));
+    // Below the table 0 and 0, above it 1 and 0: chosen with bit masks, since a
+    // choice between values became a branch per lane around the interpolation.
+    let mask = |on: bool| (on as u64).wrapping_neg();
+    let below: [bool; 4] = from_fn(|l| pos[l] <= 0.0);
+    let above: [bool; 4] = from_fn(|l| !below[l] && pos[l] >= (CDF_NODES - 1) as f64);
+    let inside: [u64; 4] = from_fn(|l| mask(!below[l] && !above[l]));
+    let cdf = from_fn(|l| {
+        f64::from_bits((cdf[l].to_bits() & inside[l]) | (1f64.to_bits() & mask(above[l])))
+    });
+    let pdf = from_fn(|l| f64::from_bits(pdf[l].to_bits() & inside[l]));
     (cdf, pdf)
 }
 
