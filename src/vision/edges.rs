@@ -132,9 +132,11 @@ impl EdgeMap {
         let i = y * w + x;
         let m = pyr.mag[i];
         let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
-        // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
-        let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as usize;
-        let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as usize;
+        // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds. (Through i32: the
+        // value is positive and small, and a float-to-usize cast costs a dozen
+        // instructions more to saturate.)
+        let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as i32 as usize;
+        let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as i32 as usize;
         if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
             return;
         }
@@ -266,21 +268,30 @@ const RUN: usize = 8;
 #[inline(always)]
 fn maxima(pyr: &Pyramid, i: usize, low: f32) -> u64 {
     let w = pyr.width;
-    let run = |v: &[f32], k: usize| -> [f32; RUN] {
-        let mut out = [0.0; RUN];
-        out.copy_from_slice(&v[k..k + RUN]);
-        out
+    // Three rows of magnitudes, one pixel wider than the run on either side, and the
+    // run's gradient: five range checks per run instead of one per neighbour.
+    let around = |k: usize| -> &[f32; RUN + 2] {
+        pyr.mag[k - 1..k + RUN + 1]
+            .try_into()
+            .expect("a slice of RUN + 2")
     };
-    let mag = &pyr.mag;
-    let (m, gx, gy) = (run(mag, i), run(&pyr.gx, i), run(&pyr.gy, i));
-    let (e, west) = (run(mag, i + 1), run(mag, i - 1));
-    let (s, n) = (run(mag, i + w), run(mag, i - w));
-    let (se, nw) = (run(mag, i + w + 1), run(mag, i - w - 1));
-    let (ne, sw) = (run(mag, i + 1 - w), run(mag, i + w - 1));
+    let run = |v: &[f32]| -> [f32; RUN] { v[i..i + RUN].try_into().expect("a slice of RUN") };
+    let (up, mid, down) = (around(i - w), around(i), around(i + w));
+    let (gx, gy) = (run(&pyr.gx), run(&pyr.gy));
     let mut found = [false; RUN];
     for l in 0..RUN {
-        let around = [e[l], west[l], s[l], n[l], se[l], nw[l], ne[l], sw[l]];
-        found[l] = is_maximum(m[l], gx[l], gy[l], around, low);
+        // east, west, south, north, south-east, north-west, north-east, south-west
+        let near = [
+            mid[l + 2],
+            mid[l],
+            down[l + 1],
+            up[l + 1],
+            down[l + 2],
+            up[l],
+            up[l + 2],
+            down[l],
+        ];
+        found[l] = is_maximum(mid[l + 1], gx[l], gy[l], near, low);
     }
     u64::from_le_bytes(found.map(u8::from))
 }
