@@ -148,7 +148,9 @@ impl Hough {
                     let k = k as usize;
                     let row = e * n_psi + k;
                     let rho = p.x * self.cos[row] + p.y * self.sin[row];
-                    let bin = (rho + rho_shift) as usize;
+                    // Positive (rho_min lies a pixel below any rho) and small: through
+                    // i32, the truncation skips a saturating cast to usize.
+                    let bin = (rho + rho_shift) as i32 as usize;
                     let cell = &mut self.acc[row * n_rho + bin];
                     *cell = cell.saturating_add(1);
                     let span = &mut self.votes_span[row];
