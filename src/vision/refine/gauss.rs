@@ -48,10 +48,7 @@ fn cdf_pdf(z: f64) -> (f64, f64) {
 }
 
 /// The normal CDF and density (see `cdf_pdf`) of four values at once, the same to the
-/// bit: the table look-ups go one
-/// by one, the interpolation in vector arithmetic.
-// Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
-#[allow(clippy::needless_range_loop)]
+/// bit: the table look-ups go one by one, the interpolation in vector arithmetic.
 #[inline(always)]
 pub(super) fn cdf_pdf_lanes(table: &CdfTable, z: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
     use std::array::from_fn;

@@ -507,8 +507,6 @@ impl Batch {
     /// Model, residual, weight and Jacobian of every lane. Each lane computes exactly
     /// what a sample at a time did (same operations, same order), four at a time so
     /// that the compiler turns it into vector arithmetic.
-    // Lane loops are indexed on purpose: that is the shape the vectoriser recognises.
-    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn model(
         &self,
