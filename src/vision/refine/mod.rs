@@ -536,19 +536,28 @@ impl Refiner {
     fn init_photometry(&mut self, frames: &[Option<EdgeFrame>; 3], x: &mut [f64; N_PARAMS]) {
         let mut acc = [[0.0f64; 4]; 3];
         let mut outside = [[0.0f64; 2]; 3 * CHUNKS_PER_EDGE];
-        for s in &self.samples {
-            let e = s.edge as usize;
+        // Stretch by stretch (a stretch's samples are consecutive, and of one edge), the
+        // sums kept in registers meanwhile: summed in memory, each addition waited for
+        // the store of the one before.
+        for run in self.samples.chunk_by(|a, b| a.chunk == b.chunk) {
+            let (e, c) = (run[0].edge as usize, run[0].chunk as usize);
             let Some(f) = &frames[e] else { continue };
-            let d = f.depth([s.x as f64, s.y as f64], x[P_BEND]);
-            let side = if d > 0.0 { 2 } else { 0 };
-            if d.abs() > 1.5 {
-                acc[e][side] += s.value as f64;
-                acc[e][side + 1] += 1.0;
+            let [mut out_sum, mut out_n, mut in_sum, mut in_n] = acc[e];
+            let [mut own_sum, mut own_n] = outside[c];
+            for s in run {
+                let d = f.depth([s.x as f64, s.y as f64], x[P_BEND]);
+                if d > 1.5 {
+                    in_sum += s.value as f64;
+                    in_n += 1.0;
+                } else if d < -1.5 {
+                    out_sum += s.value as f64;
+                    out_n += 1.0;
+                    own_sum += s.value as f64;
+                    own_n += 1.0;
+                }
             }
-            if d < -1.5 {
-                outside[s.chunk as usize][0] += s.value as f64;
-                outside[s.chunk as usize][1] += 1.0;
-            }
+            acc[e] = [out_sum, out_n, in_sum, in_n];
+            outside[c] = [own_sum, own_n];
         }
         for e in 0..3 {
             let out = acc[e][0] / acc[e][1].max(1.0);
@@ -598,10 +607,15 @@ impl Refiner {
         let mut along_sum = [0.0f64; CHUNKS_PER_EDGE];
         let mut count = [0u32; CHUNKS_PER_EDGE];
         let d = along(normal);
-        for s in &self.samples[self.ranges[e].clone()] {
-            let c = s.chunk as usize - base;
-            along_sum[c] += dot(d, sub([s.x as f64, s.y as f64], f.origin));
-            count[c] += 1;
+        // Stretch by stretch, summed in a register (see `init_photometry`).
+        for run in self.samples[self.ranges[e].clone()].chunk_by(|a, b| a.chunk == b.chunk) {
+            let c = run[0].chunk as usize - base;
+            let mut sum = along_sum[c];
+            for s in run {
+                sum += dot(d, sub([s.x as f64, s.y as f64], f.origin));
+            }
+            along_sum[c] = sum;
+            count[c] += run.len() as u32;
         }
         let p = &x[P_PHOTO + PHOTO * e..P_PHOTO + PHOTO * (e + 1)];
         // (step, outside level, samples) per stretch that counts.
