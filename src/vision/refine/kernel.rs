@@ -177,11 +177,10 @@ fn accumulate_edge_body(
     let mut acc = Accumulator::default();
     let (mut sq, mut wsum) = (0.0, 0.0);
     let table = cdf_table();
-    let mut batch = Batch::default();
     let mut lanes = StretchLanes::default();
     let mut m = ModelLanes::default();
     for first in (0..samples.len()).step_by(LANES * step) {
-        batch.fill(samples, first, step);
+        let batch = Batch::take(samples, first, step);
         batch.model(table, f, p, &st.level, &mut m);
         let all_ok = batch.sums(&m, st, &mut lanes, &mut sq, &mut wsum);
         if all_ok && acc.lane == 0 {
@@ -404,7 +403,7 @@ struct Batch {
     y: [f64; LANES],
     value: [f64; LANES],
     chunk: [usize; LANES],
-    /// Lanes holding a sample (the rest keep stale, finite values).
+    /// Lanes holding a sample (the rest hold zeros).
     len: usize,
 }
 
@@ -424,23 +423,27 @@ struct ModelLanes {
 }
 
 impl Batch {
-    /// Takes the samples `first`, `first + step`, ... (up to [`LANES`] of them).
+    /// The samples `first`, `first + step`, ... (up to [`LANES`] of them). A new batch
+    /// each time, not one refilled: then the compiler keeps it in registers, where a
+    /// refilled one was stored lane by lane and loaded as vectors, and a vector load of
+    /// a value stored in pieces waits for the pieces to reach the cache.
     #[inline(always)]
-    fn fill(&mut self, samples: &[Sample], first: usize, step: usize) {
+    fn take(samples: &[Sample], first: usize, step: usize) -> Batch {
+        let mut batch = Batch::default();
         let rest = &samples[first..];
         if step == 1 && rest.len() >= LANES {
             // The common case, in a shape the compiler unrolls.
             for (l, s) in rest[..LANES].iter().enumerate() {
-                self.set(l, s);
+                batch.set(l, s);
             }
-            self.len = LANES;
-            return;
+            batch.len = LANES;
+            return batch;
         }
-        self.len = 0;
         for s in rest.iter().step_by(step).take(LANES) {
-            self.set(self.len, s);
-            self.len += 1;
+            batch.set(batch.len, s);
+            batch.len += 1;
         }
+        batch
     }
 
     /// Adds the batch's squared residuals `m.r2` to their stretches' sums and, for the
