@@ -8,7 +8,7 @@
 //! least that bright. Every kept pixel remembers its sub-pixel position and gradient
 //! direction, which is what lets the Hough stage check polarity.
 
-use super::geometry::wrap_pi;
+use super::geometry::{truncate_index, wrap_pi};
 use super::pyramid::Pyramid;
 use super::simd::dispatch;
 
@@ -132,11 +132,9 @@ impl EdgeMap {
         let i = y * w + x;
         let m = pyr.mag[i];
         let (ux, uy) = (pyr.gx[i] / m, pyr.gy[i] / m);
-        // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds. (Through i32: the
-        // value is positive and small, and a float-to-usize cast costs a dozen
-        // instructions more to saturate.)
-        let bx = (x as f32 + BRIGHT_SIDE_PX * ux + 0.5) as i32 as usize;
-        let by = (y as f32 + BRIGHT_SIDE_PX * uy + 0.5) as i32 as usize;
+        // x, y >= 3 > BRIGHT_SIDE_PX: truncating after +0.5 rounds.
+        let bx = truncate_index(x as f32 + BRIGHT_SIDE_PX * ux + 0.5);
+        let by = truncate_index(y as f32 + BRIGHT_SIDE_PX * uy + 0.5);
         if pyr.grey[by.min(h - 1) * w + bx.min(w - 1)] < threshold {
             return;
         }

@@ -17,6 +17,14 @@ pub fn image_rad_from_screen_deg(angle_deg: f64) -> f64 {
     -angle_deg.to_radians()
 }
 
+/// `v` truncated to an index, for a `v` known to be non-negative and below 2^31 (a
+/// pixel, a bin). Through i32: a float-to-usize cast costs a dozen instructions more
+/// to saturate, and these run in the tracker's hot loops.
+#[inline(always)]
+pub fn truncate_index(v: f32) -> usize {
+    v as i32 as usize
+}
+
 /// Wraps an angle to (-pi, pi]. Inputs are differences of angles, a turn or two at
 /// most, so a loop beats the remainder (a libm call).
 pub fn wrap_pi(angle_rad: f64) -> f64 {

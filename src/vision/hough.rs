@@ -15,7 +15,7 @@
 //!   the psi that aligns it best even when the neighbouring psi bins hold its votes too.
 
 use super::edges::EdgePoint;
-use super::geometry::wrap_pi;
+use super::geometry::{truncate_index, wrap_pi};
 use super::simd::dispatch;
 
 /// Width of a psi bin, radians.
@@ -148,9 +148,8 @@ impl Hough {
                     let k = k as usize;
                     let row = e * n_psi + k;
                     let rho = p.x * self.cos[row] + p.y * self.sin[row];
-                    // Positive (rho_min lies a pixel below any rho) and small: through
-                    // i32, the truncation skips a saturating cast to usize.
-                    let bin = (rho + rho_shift) as i32 as usize;
+                    // Positive: rho_min lies a pixel below any rho.
+                    let bin = truncate_index(rho + rho_shift);
                     let cell = &mut self.acc[row * n_rho + bin];
                     *cell = cell.saturating_add(1);
                     let span = &mut self.votes_span[row];

@@ -9,6 +9,7 @@
 
 use image::GrayImage;
 
+use super::geometry::truncate_index;
 use super::simd::dispatch;
 use crate::config::Threshold;
 
@@ -123,9 +124,9 @@ impl Pyramid {
         // Every sixth pixel: the median of ~13k magnitudes is stable to a percent.
         let mut n = 0u32;
         for &m in self.mag.iter().step_by(6) {
-            // Magnitudes are finite and non-negative: clamping before the (then plain)
-            // truncation gives the bin that truncating and then clamping gives.
-            hist[(m * (1.0 / bin)).min(511.0) as i32 as usize] += 1;
+            // Magnitudes are finite and non-negative: clamping before the truncation
+            // gives the bin that truncating and then clamping gives.
+            hist[truncate_index((m * (1.0 / bin)).min(511.0))] += 1;
             n += 1;
         }
         let half = n / 2;
