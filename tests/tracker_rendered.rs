@@ -106,10 +106,11 @@ fn suite_of_600_rendered_frames() {
     assert!(sc.tip_err_median_px <= 0.072, "{why}");
     // Measured (median, p95): clean 0.0039, 0.014; clutter 0.0098, 0.043; noisy
     // 0.0145, 0.049; harsh 0.0277, 0.124 (harsh 0.0275, 0.121 before the final fit
-    // started from the coarse pass's noise and stopped sooner). The reported standard error is honest on
-    // every look: the RMS of error / sigma (sigma includes the calibration's share since
-    // the edges are tied by it) measured clean 1.09, clutter 1.16, noisy 1.05, harsh
-    // 1.01 (clean 1.94 and clutter 1.25 when sigma was the frame's noise alone).
+    // started from the coarse pass's noise and stopped sooner). The reported standard
+    // error is honest on every look: the RMS of error / sigma (sigma includes the
+    // calibration's share since the edges are tied by it) measured clean 1.09, clutter
+    // 1.16, noisy 1.05, harsh 1.01 (clean 1.94 and clutter 1.25 when sigma was the
+    // frame's noise alone).
     for (style, median, p95) in [
         ("clean", 0.0042, 0.017),
         ("clutter", 0.0105, 0.045),
