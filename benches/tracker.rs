@@ -35,6 +35,7 @@ fn tracker_for(width: u32, window_deg: f64) -> (Setup, Tracker) {
             blue: clicks.blue,
             green: clicks.green,
         }),
+        ..TrackerConfig::default()
     };
     let (reference, _) = scene::render(&session.reference);
     let cal =

@@ -79,12 +79,73 @@ impl fmt::Display for Threshold {
     }
 }
 
+/// Where pixel coordinates count from, in the config's clicks and in every output
+/// (`tracker.pixel_origin`). Inside nanoforce pixels always follow scene.md
+/// (`Centre`); the conversion happens where numbers enter or leave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PixelOrigin {
+    /// scene.md: the top-left pixel's centre is (0, 0).
+    #[default]
+    Centre,
+    /// The top-left pixel's top-left corner is (0, 0), so its centre is (0.5, 0.5)
+    /// (ImageJ's sub-pixel coordinates, and the public samples' truth).
+    Corner,
+}
+
+impl PixelOrigin {
+    /// What to add to a scene.md coordinate to express it from this origin.
+    pub fn offset_px(self) -> f64 {
+        match self {
+            PixelOrigin::Centre => 0.0,
+            PixelOrigin::Corner => 0.5,
+        }
+    }
+
+    /// A scene.md point expressed from this origin.
+    pub fn output(self, p: [f64; 2]) -> [f64; 2] {
+        p.map(|v| v + self.offset_px())
+    }
+
+    /// A point given from this origin, in scene.md's frame.
+    pub fn input(self, p: [f64; 2]) -> [f64; 2] {
+        p.map(|v| v - self.offset_px())
+    }
+
+    /// Parses the config's spelling (`"centre"`, `"center"` or `"corner"`).
+    pub fn parse(text: &str) -> Option<PixelOrigin> {
+        match text.to_ascii_lowercase().as_str() {
+            "centre" | "center" => Some(PixelOrigin::Centre),
+            "corner" => Some(PixelOrigin::Corner),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for PixelOrigin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            PixelOrigin::Centre => "centre",
+            PixelOrigin::Corner => "corner",
+        })
+    }
+}
+
+/// Largest `tracker.edge_bias_px` accepted, pixels: the edge effect moves an imaged
+/// outline by a fraction of the blur, never by pixels.
+pub const MAX_EDGE_BIAS_PX: f64 = 2.0;
+
 /// Validated `[tracker]` section.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerConfig {
     pub threshold: Threshold,
     /// Half-width of the search window around each calibrated edge orientation, degrees.
     pub window_deg: f64,
+    /// Where the clicks below and every reported pixel count from.
+    pub pixel_origin: PixelOrigin,
+    /// How far outside the probe's true outline the SEM images it (the edge effect),
+    /// frame pixels; the apex is reported where the true faces meet. 0 reports where
+    /// the imaged faces meet.
+    pub edge_bias_px: f64,
     pub calibration: Option<CalibrationConfig>,
 }
 
@@ -93,13 +154,16 @@ impl Default for TrackerConfig {
         TrackerConfig {
             threshold: Threshold::Otsu,
             window_deg: DEFAULT_WINDOW_DEG,
+            pixel_origin: PixelOrigin::Centre,
+            edge_bias_px: 0.0,
             calibration: None,
         }
     }
 }
 
 /// Validated `[tracker.calibration]`: the reference frame and the pixels a person
-/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre).
+/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre:
+/// clicks given from the corner are converted on reading).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CalibrationConfig {
     /// Resolved against the config file's directory.
@@ -139,6 +203,8 @@ struct RawCantilever {
 struct RawTracker {
     threshold: Option<toml::Value>,
     window_deg: Option<f64>,
+    pixel_origin: Option<String>,
+    edge_bias_px: Option<f64>,
     calibration: Option<RawCalibration>,
 }
 
@@ -377,15 +443,46 @@ impl Checker<'_> {
                 return Err(self.invalid("tracker.window_deg", w, "must be in (0, 45] degrees"))
             }
         };
-        let calibration = raw.calibration.map(|c| self.calibration(c)).transpose()?;
+        let pixel_origin = match raw.pixel_origin {
+            None => PixelOrigin::Centre,
+            Some(text) => PixelOrigin::parse(&text).ok_or_else(|| {
+                self.invalid(
+                    "tracker.pixel_origin",
+                    format_args!("{text:?}"),
+                    "must be \"centre\" (scene.md: the top-left pixel's centre is 0, 0) or \
+                     \"corner\" (its top-left corner is)",
+                )
+            })?,
+        };
+        let edge_bias_px = match raw.edge_bias_px {
+            None => 0.0,
+            Some(b) if b.is_finite() && b.abs() <= MAX_EDGE_BIAS_PX => b,
+            Some(b) => {
+                return Err(self.invalid(
+                    "tracker.edge_bias_px",
+                    b,
+                    &format!("must be within +-{MAX_EDGE_BIAS_PX} px"),
+                ))
+            }
+        };
+        let calibration = raw
+            .calibration
+            .map(|c| self.calibration(c, pixel_origin))
+            .transpose()?;
         Ok(TrackerConfig {
             threshold,
             window_deg,
+            pixel_origin,
+            edge_bias_px,
             calibration,
         })
     }
 
-    fn calibration(&self, raw: RawCalibration) -> Result<CalibrationConfig, ConfigError> {
+    fn calibration(
+        &self,
+        raw: RawCalibration,
+        origin: PixelOrigin,
+    ) -> Result<CalibrationConfig, ConfigError> {
         if raw.reference_image.trim().is_empty() {
             return Err(self.invalid(
                 "tracker.calibration.reference_image",
@@ -427,9 +524,9 @@ impl Checker<'_> {
         let base = self.file.parent().unwrap_or(Path::new(""));
         Ok(CalibrationConfig {
             reference_image: base.join(raw.reference_image),
-            red: raw.red,
-            blue: raw.blue,
-            green: raw.green,
+            red: raw.red.into_iter().map(|p| origin.input(p)).collect(),
+            blue: raw.blue.into_iter().map(|p| origin.input(p)).collect(),
+            green: raw.green.into_iter().map(|p| origin.input(p)).collect(),
         })
     }
 }
@@ -492,6 +589,48 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
 
     fn error_of(text: &str) -> String {
         parse(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn pixel_origin_and_edge_bias() {
+        let cfg = parse(SAMPLE).unwrap();
+        assert_eq!(cfg.tracker.pixel_origin, PixelOrigin::Centre);
+        assert_eq!(cfg.tracker.edge_bias_px, 0.0);
+        let text = SAMPLE.replace(
+            "window_deg = 20.0\n",
+            "window_deg = 20.0\npixel_origin = \"Corner\"\nedge_bias_px = 0.3\n",
+        );
+        let cfg = parse(&text).unwrap();
+        assert_eq!(cfg.tracker.pixel_origin, PixelOrigin::Corner);
+        assert_eq!(cfg.tracker.edge_bias_px, 0.3);
+        // Clicks counted from the corner are kept in scene.md's frame.
+        let cal = cfg.tracker.calibration.unwrap();
+        assert_eq!(cal.red[0], [156.3, 32.9]);
+        assert_eq!(cal.green[2], [314.3, 142.4]);
+        assert_eq!(PixelOrigin::Corner.output([1.0, 2.0]), [1.5, 2.5]);
+        assert_eq!(PixelOrigin::Centre.output([1.0, 2.0]), [1.0, 2.0]);
+        assert_eq!(PixelOrigin::parse("center"), Some(PixelOrigin::Centre));
+
+        let with = |line: &str| {
+            error_of(&SAMPLE.replace(
+                "window_deg = 20.0\n",
+                &format!("window_deg = 20.0\n{line}\n"),
+            ))
+        };
+        let msg = with("pixel_origin = \"top-left\"");
+        assert!(
+            msg.contains("tracker.pixel_origin")
+                && msg.contains("\"top-left\"")
+                && msg.contains("corner"),
+            "{msg}"
+        );
+        let msg = with("edge_bias_px = 3.5");
+        assert!(
+            msg.contains("tracker.edge_bias_px") && msg.contains("got 3.5") && msg.contains("+-2"),
+            "{msg}"
+        );
+        assert!(with("edge_bias_px = nan").contains("tracker.edge_bias_px"));
+        assert!(with("pixel_origin = 1").contains("pixel_origin"));
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 
-use crate::config::{CalibrationConfig, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
+use crate::config::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
 use crate::session::frames::load_gray;
 use crate::vision::{draw_calibration, Calibration, Edge};
 
@@ -51,6 +51,15 @@ pub struct CalibrateArgs {
     /// Search half-window, degrees, as [tracker] window_deg.
     #[arg(long, default_value_t = DEFAULT_WINDOW_DEG)]
     pub window_deg: f64,
+    /// Where the clicks (and the printed apex) count pixels from: "centre" (scene.md:
+    /// the top-left pixel's centre is 0,0) or "corner" (its corner is; ImageJ), as
+    /// [tracker] pixel_origin.
+    #[arg(long, default_value = "centre", value_name = "ORIGIN", value_parser = parse_origin)]
+    pub pixel_origin: PixelOrigin,
+}
+
+fn parse_origin(s: &str) -> Result<PixelOrigin, String> {
+    PixelOrigin::parse(s).ok_or_else(|| format!("{s:?} is neither \"centre\" nor \"corner\""))
 }
 
 fn parse_point(s: &str) -> Result<[f64; 2], String> {
@@ -90,11 +99,19 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
     let tracker = TrackerConfig {
         threshold: args.threshold,
         window_deg: args.window_deg,
-        calibration: None,
+        ..TrackerConfig::default()
     };
-    let calibration = Calibration::from_reference(&reference, &clicks, &tracker)
+    let origin = args.pixel_origin;
+    let inside = |v: &[[f64; 2]]| v.iter().map(|&p| origin.input(p)).collect();
+    let clicked = CalibrationConfig {
+        red: inside(&clicks.red),
+        blue: inside(&clicks.blue),
+        green: inside(&clicks.green),
+        ..clicks.clone()
+    };
+    let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
         .with_context(|| format!("calibrating on {}", args.image.display()))?;
-    print!("{}", calibration_block(&clicks, &calibration));
+    print!("{}", calibration_block(&clicks, &calibration, origin));
     let overlay_path = args
         .overlay
         .unwrap_or_else(|| args.image.with_file_name("calibration-overlay.png"));
@@ -108,8 +125,13 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The `[tracker.calibration]` block: clicks as keys, refined orientations as comments.
-pub fn calibration_block(clicks: &CalibrationConfig, calibration: &Calibration) -> String {
+/// The `[tracker.calibration]` block: clicks (as given, counted from `origin`) as keys,
+/// refined orientations as comments.
+pub fn calibration_block(
+    clicks: &CalibrationConfig,
+    calibration: &Calibration,
+    origin: PixelOrigin,
+) -> String {
     let points = |v: &[[f64; 2]]| {
         let inner: Vec<String> = v
             .iter()
@@ -143,10 +165,16 @@ pub fn calibration_block(clicks: &CalibrationConfig, calibration: &Calibration) 
             e.clicked_orientation_deg - e.orientation_deg
         ));
     }
-    let apex = calibration.apex_px();
+    let apex = origin.output(calibration.apex_px());
     out.push_str(&format!(
         "# Apex (blue meets green): ({:.2}, {:.2}) px\n",
         apex[0], apex[1]
     ));
+    if origin != PixelOrigin::Centre {
+        out.push_str(&format!(
+            "# Pixels counted from the top-left pixel's {origin}: \
+             [tracker] needs pixel_origin = \"{origin}\"\n"
+        ));
+    }
     out
 }

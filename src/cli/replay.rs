@@ -131,7 +131,8 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
                 times_ms.push(ms);
                 summary.detected += usize::from(estimate.detected);
                 let ms_column = args.timing.then_some(ms);
-                results::write_row(&mut csv, &name, &estimate, &sem, ms_column)?;
+                let written = estimate.with_pixel_origin(tracker.pixel_origin());
+                results::write_row(&mut csv, &name, &written, &sem, ms_column)?;
                 if let Some(dir) = &args.overlay {
                     write_overlay(dir, path, &draw_overlay(&image, &estimate))?;
                 }

@@ -98,6 +98,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         stop_when_frames_end: false,
         clock,
         monitor: Some(config.monitor.clone()),
+        pixel_origin: config.tracker.pixel_origin,
     };
     let handle = Daemon::start(config.teleop.clone(), devices, options)?;
     let outcome = handle.wait()?;

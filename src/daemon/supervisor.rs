@@ -20,6 +20,7 @@ use super::stats::{
 use super::supervisor_health::Health;
 use super::telemetry::{self, Recorder};
 use super::PublishedEstimate;
+use crate::config::PixelOrigin;
 use crate::control::{SafetyState, TeleopGains};
 use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
@@ -55,6 +56,8 @@ pub struct RunOptions {
     pub clock: Clock,
     /// The live page and the recorded thumbnails (`[monitor]`); None: neither.
     pub monitor: Option<MonitorConfig>,
+    /// `tracker.pixel_origin`: where the recorded apex columns count from.
+    pub pixel_origin: PixelOrigin,
 }
 
 impl Default for RunOptions {
@@ -70,6 +73,7 @@ impl Default for RunOptions {
             stop_when_frames_end: false,
             clock: Clock::start(),
             monitor: None,
+            pixel_origin: PixelOrigin::Centre,
         }
     }
 }
@@ -230,6 +234,7 @@ fn spawn_threads(
             let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
             let recorder = Recorder {
                 dir: dir.clone(),
+                pixel_origin: options.pixel_origin,
                 ticks: ticks_rx,
                 estimates: est_rx,
                 events: events_rx,

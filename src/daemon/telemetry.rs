@@ -16,6 +16,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use super::haptic_loop::TickRecord;
 use super::pipeline::EstimateRecord;
+use crate::config::PixelOrigin;
 
 /// The state directory: `$STATE_DIRECTORY` (set by systemd's StateDirectory=), else
 /// `$XDG_STATE_HOME/nanoforce`, else `~/.local/state/nanoforce`.
@@ -76,6 +77,8 @@ fn utc_stamp(secs: u64) -> String {
 /// The writer thread's inputs.
 pub struct Recorder {
     pub dir: PathBuf,
+    /// `tracker.pixel_origin`: where the apex columns count from.
+    pub pixel_origin: PixelOrigin,
     pub ticks: rtrb::Consumer<TickRecord>,
     pub estimates: rtrb::Consumer<EstimateRecord>,
     pub events: std::sync::mpsc::Receiver<String>,
@@ -108,7 +111,7 @@ pub fn spawn_recorder(
                     write_tick(&mut ticks, &r)?;
                 }
                 while let Ok(r) = recorder.estimates.pop() {
-                    write_estimate(&mut estimates, &r)?;
+                    write_estimate(&mut estimates, &r, recorder.pixel_origin)?;
                 }
                 while let Ok(line) = recorder.events.try_recv() {
                     writeln!(events, "{line}")?;
@@ -139,8 +142,9 @@ fn write_tick(out: &mut impl Write, r: &TickRecord) -> io::Result<()> {
     )
 }
 
-fn write_estimate(out: &mut impl Write, r: &EstimateRecord) -> io::Result<()> {
+fn write_estimate(out: &mut impl Write, r: &EstimateRecord, origin: PixelOrigin) -> io::Result<()> {
     let e = &r.estimate;
+    let apex = origin.output(e.apex_px);
     let opt = |v: f64| {
         if v.is_finite() {
             format!("{v}")
@@ -158,8 +162,8 @@ fn write_estimate(out: &mut impl Write, r: &EstimateRecord) -> io::Result<()> {
         u8::from(e.detected),
         opt(e.angle_deg),
         opt(e.force_nn),
-        opt(e.apex_px[0]),
-        opt(e.apex_px[1]),
+        opt(apex[0]),
+        opt(apex[1]),
         e.confidence,
         r.processing_ms,
         r.true_force_nn.map_or(String::new(), |f| format!("{f}"))
@@ -175,5 +179,40 @@ mod tests {
         assert_eq!(utc_stamp(0), "19700101T000000Z");
         assert_eq!(utc_stamp(951_782_400), "20000229T000000Z");
         assert_eq!(utc_stamp(1_795_000_000), "20261118T110640Z");
+    }
+
+    #[test]
+    fn apex_columns_follow_the_pixel_origin() {
+        let record = |detected: bool| EstimateRecord {
+            estimate: super::super::PublishedEstimate {
+                seq: 7,
+                frame_sequence: 9,
+                frame_time_s: 1.0,
+                published_s: 1.02,
+                detected,
+                angle_deg: if detected { -1.5 } else { f64::NAN },
+                force_nn: if detected { -420.0 } else { f64::NAN },
+                apex_px: if detected {
+                    [300.25, 200.0]
+                } else {
+                    [f64::NAN; 2]
+                },
+                confidence: 0.9,
+            },
+            processing_ms: 0.8,
+            true_force_nn: None,
+        };
+        let line = |r: &EstimateRecord, origin| {
+            let mut out = Vec::new();
+            write_estimate(&mut out, r, origin).unwrap();
+            String::from_utf8(out).unwrap()
+        };
+        let centre = line(&record(true), PixelOrigin::Centre);
+        let corner = line(&record(true), PixelOrigin::Corner);
+        assert!(centre.contains(",-420,300.25,200,0.9000,"), "{centre}");
+        assert!(corner.contains(",-420,300.75,200.5,0.9000,"), "{corner}");
+        // No apex stays empty whichever the origin.
+        let missed = line(&record(false), PixelOrigin::Corner);
+        assert!(missed.contains(",0,,,,,0.9000,"), "{missed}");
     }
 }

@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::ReportError;
+use crate::config::{Config, PixelOrigin};
 use crate::session::results::{read_results, split_csv_line, ResultRow};
 use crate::session::score::{read_truth, score, Score, TruthRow};
 
@@ -28,6 +29,8 @@ pub struct FrameRow {
     pub true_force_nn: Option<f64>,
     /// From truth.csv (replayed synthetic sessions).
     pub true_angle_deg: Option<f64>,
+    /// The apex and the edges' ends in scene.md's pixel frame (converted from the
+    /// CSV's `tracker.pixel_origin`), for drawing on the frames.
     pub tip_px: Option<[f64; 2]>,
     pub edges: [Option<[[f64; 2]; 2]>; 3],
     pub px_per_um: Option<f64>,
@@ -84,6 +87,7 @@ pub fn load(dir: &Path, csv: Option<&Path>) -> Result<SessionData, ReportError> 
 
 fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
     let results = read_results(csv)?;
+    let origin = pixel_origin_of(&dir.join("probe.toml"));
     let truth_path = dir.join("truth.csv");
     let truth = if truth_path.is_file() {
         Some(read_truth(&truth_path)?)
@@ -107,6 +111,7 @@ fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
             let t = truth_of(r);
             let mut row = replayed_row(
                 r,
+                origin,
                 t.and_then(|t| t.t_s).filter(|_| timed).unwrap_or(k as f64),
             );
             if let Some(t) = t.filter(|t| t.detected) {
@@ -130,7 +135,14 @@ fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
     })
 }
 
-fn replayed_row(r: &ResultRow, t: f64) -> FrameRow {
+/// Where the pixels of a session's CSV count from: its configuration's
+/// `tracker.pixel_origin`, or scene.md's centre when the file is missing or does not
+/// load (the replay or run that wrote the CSV would have refused such a file).
+fn pixel_origin_of(config: &Path) -> PixelOrigin {
+    Config::load(config).map_or(PixelOrigin::Centre, |c| c.tracker.pixel_origin)
+}
+
+fn replayed_row(r: &ResultRow, origin: PixelOrigin, t: f64) -> FrameRow {
     FrameRow {
         name: r.frame.clone(),
         t,
@@ -141,8 +153,8 @@ fn replayed_row(r: &ResultRow, t: f64) -> FrameRow {
         processing_ms: r.processing_ms,
         true_force_nn: None,
         true_angle_deg: None,
-        tip_px: r.tip_px.filter(|_| r.detected),
-        edges: r.edges,
+        tip_px: r.tip_px.filter(|_| r.detected).map(|p| origin.input(p)),
+        edges: r.edges.map(|e| e.map(|ends| ends.map(|p| origin.input(p)))),
         px_per_um: r.px_per_um,
         magnification: r.magnification,
         frame_seq: None,
@@ -154,10 +166,14 @@ fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportErro
         path: estimates.to_path_buf(),
         source,
     })?;
-    let rows = parse_estimates(&text).map_err(|reason| ReportError::Format {
+    let mut rows = parse_estimates(&text).map_err(|reason| ReportError::Format {
         path: estimates.to_path_buf(),
         reason,
     })?;
+    let origin = pixel_origin_of(&dir.join("config.toml"));
+    for row in &mut rows {
+        row.tip_px = row.tip_px.map(|p| origin.input(p));
+    }
     let stats = std::fs::read_to_string(dir.join("stats.json"))
         .ok()
         .and_then(|s| serde_json::from_str(&s).ok());
@@ -253,5 +269,44 @@ mod tests {
         assert!(parse_estimates("a,b\n").is_err());
         let bad = parse_estimates("frame_seq,frame_time_s,detected\n1,soon,1\n").unwrap_err();
         assert!(bad.contains("row 2"), "{bad}");
+    }
+
+    #[test]
+    fn replayed_pixels_come_back_to_scene_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = crate::session::results::header(false);
+        let cells = header.split(',').count();
+        let mut row = vec![String::new(); cells];
+        for (i, v) in ["f0.png", "1", "1.5", "300.0", "100.5", "200.75"]
+            .iter()
+            .enumerate()
+        {
+            row[i] = v.to_string();
+        }
+        let blue_x0 = header.split(',').position(|h| h == "blue_x0").unwrap();
+        for (k, v) in ["10.5", "20.5", "30.5", "40.5"].iter().enumerate() {
+            row[blue_x0 + k] = v.to_string();
+        }
+        std::fs::write(
+            dir.path().join("replay.csv"),
+            format!("{header}\n{}\n", row.join(",")),
+        )
+        .unwrap();
+        let config = |origin: &str| {
+            std::fs::write(
+                dir.path().join("probe.toml"),
+                format!(
+                    "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n\
+                     [tracker]\npixel_origin = \"{origin}\"\n"
+                ),
+            )
+            .unwrap();
+            load(dir.path(), None).unwrap().rows[0].clone()
+        };
+        let centre = config("centre");
+        assert_eq!(centre.tip_px, Some([100.5, 200.75]));
+        let corner = config("corner");
+        assert_eq!(corner.tip_px, Some([100.0, 200.25]));
+        assert_eq!(corner.edges[1], Some([[10.0, 20.0], [30.0, 40.0]]));
     }
 }

@@ -40,6 +40,8 @@ mod verify;
 
 use std::fmt;
 
+use crate::config::PixelOrigin;
+
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
 pub use overlay::{draw_calibration, draw_overlay};
@@ -135,6 +137,17 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// The estimate with its pixels (apex, edge ends) counted from `origin`, for the
+    /// numbers nanoforce writes out; drawing and tracking keep scene.md's frame.
+    pub fn with_pixel_origin(mut self, origin: PixelOrigin) -> Estimate {
+        self.apex_px = self.apex_px.map(|a| origin.output(a));
+        for fit in self.edges.iter_mut().flatten() {
+            fit.start_px = origin.output(fit.start_px);
+            fit.end_px = origin.output(fit.end_px);
+        }
+        self
+    }
+
     /// A frame without a usable tip.
     pub fn missed(miss: Miss, confidence: f64) -> Estimate {
         Estimate {

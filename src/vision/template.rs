@@ -107,6 +107,20 @@ impl Template {
         (red.tip_tau, red.tip_tau + dir * span.min(red.length()))
     }
 
+    /// Where the probe's true faces meet in a frame when the SEM images its outline
+    /// `bias` pixels outside them (the edge effect): the apex moved into the pyramid
+    /// until it lies `bias` from both imaged faces, blue and green.
+    pub fn true_apex(&self, pose: &Pose, bias: f64) -> [f64; 2] {
+        let [b, g] = [BLUE, GREEN].map(|e| rotate(self.edges[e].normal, pose.psi));
+        // Solve b . d = g . d = bias (Cramer); faces of a pyramid are never parallel.
+        let det = b[0] * g[1] - b[1] * g[0];
+        if bias == 0.0 || det.abs() < 1e-9 {
+            return pose.apex;
+        }
+        let d = [bias * (g[1] - b[1]) / det, bias * (b[0] - g[0]) / det];
+        add(pose.apex, d)
+    }
+
     /// Inward normal angles (image radians) of the three edges in the reference.
     pub fn normal_angles(&self) -> [f64; 3] {
         self.edges.map(|e| e.normal[1].atan2(e.normal[0]))
@@ -175,5 +189,35 @@ mod tests {
         }
         let red = t.line(&pose, RED);
         assert!((red.depth(pose.apex) - 100.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn true_apex_lies_the_bias_inside_both_imaged_faces() {
+        let t = toy();
+        let upright = Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: t.apex,
+        };
+        // Faces at +-30 deg from the axis: 0.3 px across each is 0.6 px along the axis,
+        // up into the pyramid.
+        let a = t.true_apex(&upright, 0.3);
+        assert!(
+            (a[0] - 100.0).abs() < 1e-12 && (a[1] - 99.4).abs() < 1e-12,
+            "{a:?}"
+        );
+        assert_eq!(t.true_apex(&upright, 0.0), t.apex);
+        let pose = Pose {
+            psi: -0.4,
+            scale: 0.5,
+            apex: [30.0, 40.0],
+        };
+        for bias in [0.3, -0.2] {
+            let a = t.true_apex(&pose, bias);
+            for e in [BLUE, GREEN] {
+                let depth = t.line(&pose, e).depth(a);
+                assert!((depth - bias).abs() < 1e-12, "edge {e}: {depth} for {bias}");
+            }
+        }
     }
 }

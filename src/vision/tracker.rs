@@ -26,7 +26,7 @@ use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
-use crate::config::{Threshold, TrackerConfig};
+use crate::config::{PixelOrigin, Threshold, TrackerConfig};
 use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
@@ -99,6 +99,10 @@ pub struct Tracker {
     /// The final fits' tie between the edges: each by its calibration error.
     tied: Turns,
     cantilever: Option<Cantilever>,
+    /// `tracker.edge_bias_px`: the reported apex is where the true faces meet.
+    edge_bias_px: f64,
+    /// `tracker.pixel_origin`, for whoever writes the estimates out.
+    pixel_origin: PixelOrigin,
     coherence: bool,
     last: Option<Last>,
     pyr: Pyramid,
@@ -124,6 +128,8 @@ impl Tracker {
             calibration,
             tied,
             cantilever,
+            edge_bias_px: cfg.edge_bias_px,
+            pixel_origin: cfg.pixel_origin,
             coherence: true,
             last: None,
             pyr: Pyramid::default(),
@@ -148,6 +154,12 @@ impl Tracker {
 
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
+    }
+
+    /// Where the configuration counts pixels from: estimates are in scene.md's frame,
+    /// and what writes them out converts with [`Estimate::with_pixel_origin`].
+    pub fn pixel_origin(&self) -> PixelOrigin {
+        self.pixel_origin
     }
 
     /// Tracks the tip in one 8-bit frame.
@@ -359,7 +371,7 @@ impl Tracker {
             angle_deg: Some(angle_deg),
             force_nn: force.map(|f| f.value),
             force_saturated: force.is_some_and(|f| f.saturated),
-            apex_px: Some(pose.apex),
+            apex_px: Some(t.true_apex(pose, self.edge_bias_px)),
             edges,
             angle_sigma_deg: Some(fit.turn_sigma.to_degrees()),
             scale: Some(pose.scale),

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use image::GrayImage;
-use nanoforce::config::Config;
+use nanoforce::config::{Config, TrackerConfig};
 pub use nanoforce::session::score::{percentile, Score};
 use nanoforce::vision::{Calibration, Estimate, Tracker};
 
@@ -94,11 +94,12 @@ impl Session {
 
     /// Tracks every frame in order; returns the estimates by truth row.
     pub fn run(&self, coherence: bool) -> Vec<Estimate> {
-        let mut tracker = Tracker::new(
-            &self.config.tracker,
-            self.calibrate(),
-            Some(self.config.cantilever),
-        );
+        self.run_with(&self.config.tracker, coherence)
+    }
+
+    /// As [`Session::run`], with other `[tracker]` settings (same calibration).
+    pub fn run_with(&self, tracker: &TrackerConfig, coherence: bool) -> Vec<Estimate> {
+        let mut tracker = Tracker::new(tracker, self.calibrate(), Some(self.config.cantilever));
         tracker.set_coherence(coherence);
         self.truth
             .iter()
@@ -267,6 +268,7 @@ pub mod rendered {
                 blue: fix(clicks.blue, edges.blue, 2),
                 green: fix(clicks.green, edges.green, 3),
             }),
+            ..TrackerConfig::default()
         }
     }
 
