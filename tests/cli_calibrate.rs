@@ -109,3 +109,49 @@ fn clicks_outside_the_image_and_bad_syntax_are_errors() {
         "{err}"
     );
 }
+
+#[test]
+fn clicks_and_apex_counted_from_the_corner() {
+    let apex = |block: &str| -> [f64; 2] {
+        let line = block
+            .lines()
+            .find(|l| l.starts_with("# Apex"))
+            .unwrap_or_else(|| panic!("{block}"));
+        let inner = &line[line.rfind('(').unwrap() + 1..line.rfind(')').unwrap()];
+        let v: Vec<f64> = inner
+            .split(',')
+            .map(|v| v.trim().parse().unwrap())
+            .collect();
+        [v[0], v[1]]
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = calibrate(dir.path(), &[]);
+    assert!(out.status.success());
+    let centre = String::from_utf8(out.stdout).unwrap();
+    assert!(!centre.contains("pixel_origin"), "{centre}");
+    let out = calibrate(dir.path(), &["--pixel-origin", "corner"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let corner = String::from_utf8(out.stdout).unwrap();
+    // The same clicks, read from the corner, sit half a pixel up and left; the printed
+    // apex is counted from the corner again. The refined edges barely depend on where
+    // the clicks start them, so the apex reads half a pixel more.
+    assert!(
+        corner.contains("[tracker] needs pixel_origin = \"corner\""),
+        "{corner}"
+    );
+    assert!(
+        corner.contains("red = [[156.8, 33.4]"),
+        "clicks as given: {corner}"
+    );
+    let (a, b) = (apex(&centre), apex(&corner));
+    for k in 0..2 {
+        assert!((b[k] - a[k] - 0.5).abs() < 0.05, "{a:?} -> {b:?}");
+    }
+    let out = calibrate(dir.path(), &["--pixel-origin", "middle"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("\"middle\""), "{err}");
+}

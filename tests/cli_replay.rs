@@ -89,6 +89,119 @@ fn csv_contract_and_byte_identical_reruns() {
     }
 }
 
+/// A results CSV as rows of named cells.
+fn read_rows(csv: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    lines
+        .map(|l| {
+            let cells = l.split(',').map(String::from);
+            header.iter().cloned().zip(cells).collect()
+        })
+        .collect()
+}
+
+/// `text` with every clicked pixel of `[tracker.calibration]` given from the corner:
+/// the same pixels, plus half a pixel.
+fn clicks_from_the_corner(text: &str) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let key = ["red", "blue", "green"]
+            .into_iter()
+            .find(|k| line.starts_with(&format!("{k} = [[")));
+        match key {
+            Some(key) => {
+                let values: Vec<f64> = line[key.len() + 3..]
+                    .split(['[', ']', ','])
+                    .filter_map(|v| v.trim().parse().ok())
+                    .collect();
+                let points: Vec<String> = values
+                    .chunks(2)
+                    .map(|p| format!("[{}, {}]", p[0] + 0.5, p[1] + 0.5))
+                    .collect();
+                out += &format!("{key} = [{}]\n", points.join(", "));
+            }
+            None => out += &format!("{line}\n"),
+        }
+    }
+    out
+}
+
+#[test]
+fn pixel_origin_and_edge_bias_move_only_the_pixels() {
+    let (dir, _, frames) = session_copy("sequence", 12);
+    std::fs::create_dir(dir.path().join("frames")).unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        f.save(dir.path().join(format!("frames/frame_{i:05}.png")))
+            .unwrap();
+    }
+    let plain = dir.path().join("probe.toml");
+    let text = std::fs::read_to_string(&plain).unwrap();
+    assert!(text.contains("window_deg = 20.0\n"));
+    let keyed = dir.path().join("corner.toml");
+    std::fs::write(
+        &keyed,
+        clicks_from_the_corner(&text.replace(
+            "window_deg = 20.0\n",
+            "window_deg = 20.0\npixel_origin = \"corner\"\nedge_bias_px = 0.3\n",
+        )),
+    )
+    .unwrap();
+    let frames_dir = dir.path().join("frames");
+    let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+    for (config, csv) in [(&plain, &a), (&keyed, &b)] {
+        let out = replay(&frames_dir, config, csv, &[]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let (a, b) = (read_rows(&a), read_rows(&b));
+    assert_eq!(a.len(), 12);
+    let num = |r: &std::collections::HashMap<String, String>, k: &str| -> f64 {
+        r[k].parse().unwrap_or_else(|_| panic!("{k}: {:?}", r[k]))
+    };
+    for (a, b) in a.iter().zip(&b) {
+        assert_eq!(a["detected"], "1", "{a:?}");
+        for k in [
+            "angle_deg",
+            "force_nN",
+            "confidence",
+            "angle_sigma_deg",
+            "scale",
+        ] {
+            assert_eq!(a[k], b[k], "{k}: the same tracking");
+        }
+        // Edge ends: the same points, counted from the corner.
+        for k in a.keys().filter(|k| k.contains("_x") || k.contains("_y")) {
+            if k.starts_with("tip") || a[k].is_empty() {
+                continue;
+            }
+            assert!(
+                (num(b, k) - num(a, k) - 0.5).abs() < 0.006,
+                "{k}: {a:?} {b:?}"
+            );
+        }
+        // The apex: where the imaged faces meet (centre), or 0.3 px inside both
+        // (corner, less its half pixel).
+        let tip = |r, d: f64| [num(r, "tip_x") - d, num(r, "tip_y") - d];
+        let depth = |p: [f64; 2], face: &str| {
+            let (x0, y0) = (num(a, &format!("{face}_x0")), num(a, &format!("{face}_y0")));
+            let (x1, y1) = (num(a, &format!("{face}_x1")), num(a, &format!("{face}_y1")));
+            let (dx, dy) = (x1 - x0, y1 - y0);
+            ((p[0] - x0) * dy - (p[1] - y0) * dx).abs() / dx.hypot(dy)
+        };
+        for face in ["blue", "green"] {
+            let imaged = depth(tip(a, 0.0), face);
+            let true_apex = depth(tip(b, 0.5), face);
+            assert!(imaged < 0.01, "{face}: {imaged} {a:?}");
+            assert!((true_apex - 0.3).abs() < 0.01, "{face}: {true_apex} {b:?}");
+        }
+    }
+}
+
 #[test]
 fn corrupt_frames_are_reported_and_skipped() {
     let (dir, _src, frames) = session_copy("mixed", 3);

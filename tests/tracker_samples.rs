@@ -10,8 +10,9 @@
 mod tracker_support;
 
 use image::Rgb;
+use nanoforce::config::PixelOrigin;
 use nanoforce::vision::{draw_calibration, draw_overlay, Calibration, Edge, Tracker, VisionError};
-use tracker_support::{angle_rms_deg, result_csv, sample, score, table};
+use tracker_support::{angle_rms_deg, percentile, result_csv, sample, score, table, Session};
 
 #[test]
 fn mixed_sample_in_random_order() {
@@ -54,6 +55,84 @@ fn sequence_sample_with_and_without_coherence() {
         assert!(sc.angle_err_max_deg <= 0.085, "{why}");
         assert!(sc.tip_err_median_px <= 0.6, "{why}");
     }
+}
+
+/// Each probe frame's apex as written with `pixel_origin = "corner"`: at no edge bias,
+/// and its shift per pixel of `edge_bias_px` (the shift is linear in the bias).
+fn corner_apexes(s: &Session) -> Vec<Option<([f64; 2], [f64; 2])>> {
+    let at = |bias: f64| {
+        let mut cfg = s.config.tracker.clone();
+        cfg.pixel_origin = PixelOrigin::Corner;
+        cfg.edge_bias_px = bias;
+        s.run_with(&cfg, false)
+            .into_iter()
+            .map(|e| e.with_pixel_origin(cfg.pixel_origin).apex_px)
+            .collect::<Vec<_>>()
+    };
+    let (zero, one) = (at(0.0), at(1.0));
+    s.truth
+        .iter()
+        .zip(zero.iter().zip(&one))
+        .map(|(t, (a, b))| match (t.detected, a, b) {
+            (true, Some(a), Some(b)) => Some((*a, [b[0] - a[0], b[1] - a[1]])),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The edge bias that best explains `s`'s apex truth (least squares over its frames).
+fn fitted_bias(s: &Session, apexes: &[Option<([f64; 2], [f64; 2])>]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (t, (a, d)) in s
+        .truth
+        .iter()
+        .zip(apexes)
+        .filter_map(|(t, a)| a.map(|a| (t, a)))
+    {
+        num += d[0] * (t.tip[0] - a[0]) + d[1] * (t.tip[1] - a[1]);
+        den += d[0] * d[0] + d[1] * d[1];
+    }
+    num / den
+}
+
+/// The apex error's median over `s`'s frames with the edge bias `bias`.
+fn apex_median_px(s: &Session, apexes: &[Option<([f64; 2], [f64; 2])>], bias: f64) -> f64 {
+    let errors: Vec<f64> = s
+        .truth
+        .iter()
+        .zip(apexes)
+        .filter_map(|(t, a)| {
+            a.map(|(a, d)| (a[0] + bias * d[0] - t.tip[0]).hypot(a[1] + bias * d[1] - t.tip[1]))
+        })
+        .collect();
+    percentile(&errors, 50.0)
+}
+
+#[test]
+fn apex_in_the_samples_convention_calibrated_on_the_other_session() {
+    // The samples' truth counts pixels from the top-left pixel's corner, and its
+    // outline lies inside the imaged edges (docs/tracker.md, Public samples). Written
+    // with pixel_origin = "corner", the edge bias fitted on one session brings the
+    // other session's apex median well under the issue's 0.5 px: an instrument
+    // calibration that transfers between two probes, not a fit to the frames scored.
+    let sessions = [sample("mixed"), sample("sequence")];
+    let apexes = sessions.each_ref().map(corner_apexes);
+    let bias = [0, 1].map(|k| fitted_bias(&sessions[k], &apexes[k]));
+    let held_out = [0, 1].map(|k| apex_median_px(&sessions[k], &apexes[k], bias[1 - k]));
+    let unbiased = [0, 1].map(|k| apex_median_px(&sessions[k], &apexes[k], 0.0));
+    let why = format!(
+        "edge bias fitted on mixed, sequence: {bias:?}; apex medians with the other's \
+         bias {held_out:?}, with none {unbiased:?}"
+    );
+    // Measured 0.291 and 0.306 px: the same to 0.015 px on two different probes.
+    assert!(bias.iter().all(|b| (0.27..=0.33).contains(b)), "{why}");
+    assert!((bias[0] - bias[1]).abs() <= 0.03, "{why}");
+    // Measured 0.124 (mixed) and 0.104 px (sequence); without the bias, corner-counted
+    // apexes are 0.66 and 0.70 px off, as far as scene.md's centre-counted ones.
+    assert!(held_out[0] <= 0.135, "{why}");
+    assert!(held_out[1] <= 0.115, "{why}");
+    assert!(unbiased.iter().all(|m| *m >= 0.6), "{why}");
+    println!("{why}");
 }
 
 #[test]
