@@ -173,6 +173,18 @@ pub struct CalibrationConfig {
     pub green: Vec<[f64; 2]>,
 }
 
+impl CalibrationConfig {
+    /// Clicks given from `origin`, brought into scene.md's frame.
+    pub fn counted_from(mut self, origin: PixelOrigin) -> CalibrationConfig {
+        for points in [&mut self.red, &mut self.blue, &mut self.green] {
+            for p in points.iter_mut() {
+                *p = origin.input(*p);
+            }
+        }
+        self
+    }
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
@@ -524,10 +536,11 @@ impl Checker<'_> {
         let base = self.file.parent().unwrap_or(Path::new(""));
         Ok(CalibrationConfig {
             reference_image: base.join(raw.reference_image),
-            red: raw.red.into_iter().map(|p| origin.input(p)).collect(),
-            blue: raw.blue.into_iter().map(|p| origin.input(p)).collect(),
-            green: raw.green.into_iter().map(|p| origin.input(p)).collect(),
-        })
+            red: raw.red,
+            blue: raw.blue,
+            green: raw.green,
+        }
+        .counted_from(origin))
     }
 }
 

@@ -102,13 +102,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         ..TrackerConfig::default()
     };
     let origin = args.pixel_origin;
-    let inside = |v: &[[f64; 2]]| v.iter().map(|&p| origin.input(p)).collect();
-    let clicked = CalibrationConfig {
-        red: inside(&clicks.red),
-        blue: inside(&clicks.blue),
-        green: inside(&clicks.green),
-        ..clicks.clone()
-    };
+    let clicked = clicks.clone().counted_from(origin);
     let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
         .with_context(|| format!("calibrating on {}", args.image.display()))?;
     print!("{}", calibration_block(&clicks, &calibration, origin));
