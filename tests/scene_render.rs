@@ -84,6 +84,51 @@ fn true_edges_lie_on_the_intensity_transitions() {
 }
 
 #[test]
+fn an_edge_bias_images_every_edge_that_far_outside_the_truth() {
+    for entry in [Entry::Left, Entry::Right] {
+        for angle in [-20.0, 0.0, 9.0] {
+            let mut spec = plain(angle, entry);
+            let (unbiased, _) = render(&spec);
+            spec.look.edge_bias_px = 0.3;
+            let (img, truth) = render(&spec);
+            let step = spec.look.probe - spec.look.background;
+            let edges = truth.edges.expect("probe in view");
+            for (name, edge) in [
+                ("red", edges.red),
+                ("blue", edges.blue),
+                ("green", edges.green),
+            ] {
+                for t in [0.3, 0.5, 0.7] {
+                    // The brightness the bias adds across the edge, over the step: how
+                    // far the edge moved (exact for any profile, unlike a crossing).
+                    let (dx, dy) = (edge.to[0] - edge.from[0], edge.to[1] - edge.from[1]);
+                    let len = dx.hypot(dy);
+                    let p = [edge.from[0] + t * dx, edge.from[1] + t * dy];
+                    let moved: f64 = (-80..80)
+                        .map(|k| {
+                            let s = (k as f64 + 0.5) * 0.05;
+                            let q = [p[0] - s * dy / len, p[1] + s * dx / len];
+                            bilinear(&img, q[0], q[1]) - bilinear(&unbiased, q[0], q[1])
+                        })
+                        .sum::<f64>()
+                        * 0.05
+                        / step;
+                    assert!(
+                        (moved - 0.3).abs() < 0.02,
+                        "{entry:?} {angle} {name} t={t}: {moved} px"
+                    );
+                }
+            }
+            assert_eq!(
+                [truth.tip_x, truth.tip_y],
+                spec.apex_px,
+                "the truth is the true apex"
+            );
+        }
+    }
+}
+
+#[test]
 fn apex_is_the_tip_of_the_bright_pyramid() {
     let spec = plain(6.0, Entry::Left);
     let (img, truth) = render(&spec);

@@ -162,6 +162,12 @@ impl Renderer {
             &mut self.polygon,
         );
         let look = spec.look;
+        if look.edge_bias_px != 0.0 {
+            // The imaged outline: every side moved out by the bias (mitred corners, so
+            // the apex moves bias / sin(half its angle) along its bisector).
+            inset_polygon(&self.polygon, -look.edge_bias_px, &mut self.inset);
+            std::mem::swap(&mut self.polygon, &mut self.inset);
+        }
         let ramp = (look.probe_ramp / f64::from(spec.width)) as f32;
         let level0 = (look.probe - 0.5 * look.probe_ramp) as f32;
         let level = |x: usize| level0 + ramp * x as f32;
@@ -232,8 +238,8 @@ fn paint_over(
     });
 }
 
-/// Offsets a simple closed polygon inward by `d` pixels (mitred corners); the band
-/// between the two is the probe's bright outline.
+/// Offsets a simple closed polygon inward by `d` pixels (outward for a negative `d`;
+/// mitred corners); the band between the two is the probe's bright outline.
 fn inset_polygon(polygon: &[[f64; 2]], d: f64, out: &mut Vec<[f64; 2]>) {
     let n = polygon.len();
     let area2: f64 = (0..n)

@@ -43,6 +43,7 @@ impl Style {
             probe_ramp: 12.0,
             outline: 3.0,
             outline_width_px: 2.5,
+            edge_bias_px: 0.0,
             particles: 3,
             scratches: 0,
             substrate: None,
@@ -110,6 +111,11 @@ pub struct Look {
     pub outline: f64,
     /// Width of that band, pixels.
     pub outline_width_px: f64,
+    /// How far outside the probe's true outline it is imaged (an SEM's edge effect as a
+    /// shift), pixels; the truth keeps the true outline. 0 (every preset) draws it where
+    /// it is, as scene.md does; the public samples' truth reads as about 0.3 px
+    /// (docs/tracker.md, "Apex convention").
+    pub edge_bias_px: f64,
     /// Number of bright particles.
     pub particles: u32,
     /// Number of straight scratches.
