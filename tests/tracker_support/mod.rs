@@ -283,7 +283,17 @@ pub mod rendered {
 
     /// A tracker calibrated on `session`'s reference, with its cantilever for forces.
     pub fn tracker(session: &Session, coherence: bool) -> Tracker {
-        let (cfg, cal) = calibrate(session);
+        tracker_with(session, coherence, |_| ())
+    }
+
+    /// As [`tracker`], with `adjust` applied to the settings after calibration.
+    pub fn tracker_with(
+        session: &Session,
+        coherence: bool,
+        adjust: impl Fn(&mut TrackerConfig),
+    ) -> Tracker {
+        let (mut cfg, cal) = calibrate(session);
+        adjust(&mut cfg);
         let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
         tracker.set_coherence(coherence);
         tracker
@@ -291,7 +301,11 @@ pub mod rendered {
 
     /// Renders and tracks every frame of `session` in order.
     pub fn run(session: &Session, coherence: bool) -> (Vec<Truth>, Vec<Estimate>) {
-        let mut tracker = tracker(session, coherence);
+        run_with(session, tracker(session, coherence))
+    }
+
+    /// Renders every frame of `session` and tracks it with `tracker`, in order.
+    pub fn run_with(session: &Session, mut tracker: Tracker) -> (Vec<Truth>, Vec<Estimate>) {
         let mut frame = GrayImage::new(1, 1);
         let mut truths = Vec::new();
         let mut estimates = Vec::new();
