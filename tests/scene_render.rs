@@ -3,7 +3,7 @@
 //! frame sizes and render time.
 
 use image::GrayImage;
-use nanoforce::scene::{render, render_into, Entry, FrameSpec, Segment, Style};
+use nanoforce::scene::{render, render_into, Edges, Entry, FrameSpec, Segment, Style};
 
 /// A frame with no noise, shading or clutter, so intensities are exactly the geometry.
 fn plain(angle_deg: f64, entry: Entry) -> FrameSpec {
@@ -17,6 +17,15 @@ fn plain(angle_deg: f64, entry: Entry) -> FrameSpec {
     spec.look.particles = 0;
     spec.look.jitter_fraction = 0.0;
     spec
+}
+
+/// The three true edges with their names, for messages.
+fn named(edges: &Edges) -> [(&'static str, Segment); 3] {
+    [
+        ("red", edges.red),
+        ("blue", edges.blue),
+        ("green", edges.green),
+    ]
 }
 
 fn bilinear(img: &GrayImage, x: f64, y: f64) -> f64 {
@@ -69,11 +78,7 @@ fn true_edges_lie_on_the_intensity_transitions() {
             let (img, truth) = render(&spec);
             let mid = 0.5 * (spec.look.probe + spec.look.background);
             let edges = truth.edges.expect("probe in view");
-            for (name, edge) in [
-                ("red", edges.red),
-                ("blue", edges.blue),
-                ("green", edges.green),
-            ] {
+            for (name, edge) in named(&edges) {
                 for t in [0.3, 0.5, 0.7] {
                     let off = crossing_offset(&img, &edge, t, mid);
                     assert!(off.abs() < 0.05, "{entry:?} {angle} {name} t={t}: {off} px");
@@ -93,11 +98,7 @@ fn an_edge_bias_images_every_edge_that_far_outside_the_truth() {
             let (img, truth) = render(&spec);
             let step = spec.look.probe - spec.look.background;
             let edges = truth.edges.expect("probe in view");
-            for (name, edge) in [
-                ("red", edges.red),
-                ("blue", edges.blue),
-                ("green", edges.green),
-            ] {
+            for (name, edge) in named(&edges) {
                 for t in [0.3, 0.5, 0.7] {
                     // The brightness the bias adds across the edge, over the step: how
                     // far the edge moved (exact for any profile, unlike a crossing).

@@ -61,12 +61,7 @@ fn suite_of_600_rendered_frames() {
     // some of them).
     let seed = suite_seed(31);
     let sessions = scene::suite(seed, 12, 50);
-    let (mut t, mut e) = (Vec::new(), Vec::new());
-    for s in &sessions {
-        let (ti, ei) = rendered::run(s, false);
-        t.extend(ti);
-        e.extend(ei);
-    }
+    let (t, e) = rendered::run_all(&sessions, false, |_| ());
     let sc = score(&t, &e);
     let why = format!("{sc:?}\n{}", table(&t, &e));
     println!("all: {sc:?}");
@@ -278,12 +273,7 @@ fn edge_bias_reports_the_true_apex_on_frames_imaged_outside_it() {
     // px off the true apex. With tracker.edge_bias_px set to the same 0.3 the apex
     // comes back to the unbiased frames' accuracy; the angles do not move.
     let mut sessions = scene::suite(8, 2, 40);
-    let (mut t0, mut e0) = (Vec::new(), Vec::new());
-    for s in &sessions {
-        let (ti, ei) = rendered::run(s, false);
-        t0.extend(ti);
-        e0.extend(ei);
-    }
+    let (t0, e0) = rendered::run_all(&sessions, false, |_| ());
     let plain = score(&t0, &e0);
     for s in &mut sessions {
         s.reference.look.edge_bias_px = 0.3;
@@ -291,15 +281,8 @@ fn edge_bias_reports_the_true_apex_on_frames_imaged_outside_it() {
             f.look.edge_bias_px = 0.3;
         }
     }
-    let (mut t, mut imaged, mut corrected) = (Vec::new(), Vec::new(), Vec::new());
-    for s in &sessions {
-        let (ti, ei) = rendered::run_with(s, rendered::tracker(s, false));
-        let with = rendered::tracker_with(s, false, |cfg| cfg.edge_bias_px = 0.3);
-        let (_, ci) = rendered::run_with(s, with);
-        t.extend(ti);
-        imaged.extend(ei);
-        corrected.extend(ci);
-    }
+    let (t, imaged) = rendered::run_all(&sessions, false, |_| ());
+    let (_, corrected) = rendered::run_all(&sessions, false, |cfg| cfg.edge_bias_px = 0.3);
     let (a, b) = (score(&t, &imaged), score(&t, &corrected));
     let why = format!("no bias rendered: {plain:?}\nedge bias 0: {a:?}\nedge bias 0.3: {b:?}");
     println!("{why}");

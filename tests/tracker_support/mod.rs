@@ -304,6 +304,22 @@ pub mod rendered {
         run_with(session, tracker(session, coherence))
     }
 
+    /// Renders and tracks every frame of each session in turn (each with its own
+    /// tracker, `adjust` applied to the settings), all in one list.
+    pub fn run_all(
+        sessions: &[Session],
+        coherence: bool,
+        adjust: impl Fn(&mut TrackerConfig),
+    ) -> (Vec<Truth>, Vec<Estimate>) {
+        let (mut truths, mut estimates) = (Vec::new(), Vec::new());
+        for s in sessions {
+            let (t, e) = run_with(s, tracker_with(s, coherence, &adjust));
+            truths.extend(t);
+            estimates.extend(e);
+        }
+        (truths, estimates)
+    }
+
     /// Renders every frame of `session` and tracks it with `tracker`, in order.
     pub fn run_with(session: &Session, mut tracker: Tracker) -> (Vec<Truth>, Vec<Estimate>) {
         let mut frame = GrayImage::new(1, 1);
