@@ -8,7 +8,8 @@ fn main() -> ExitCode {
     match nanoforce::cli::run(cli) {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("nanoforce: error: {}", message(&err));
+            let priority = nanoforce::cli::logging::error_prefix();
+            eprintln!("{priority}nanoforce: error: {}", message(&err));
             ExitCode::FAILURE
         }
     }

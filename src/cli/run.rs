@@ -140,7 +140,7 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
     let l = &stats.haptic_loop;
     let f = &stats.frames;
     let opt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
-    eprintln!(
+    tracing::info!(
         "ran {:.1} s: haptic loop {:.1} Hz (period p50 {} us, p99 {} us, max {} us, {} overruns); \
          frames {} received, {} tracked, {} detected, {} dropped, latency p50 {} ms p99 {} ms",
         stats.duration_s,
@@ -161,20 +161,21 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
         stats.force.rms_error_nn,
         stats.force.max_error_nn,
     ) {
-        eprintln!(
+        tracing::info!(
             "force against the simulated truth: peak {peak:.0} nN, rms error {rms:.1} nN ({:.2} %), \
              max error {max:.1} nN ({:.2} %)",
             100.0 * rms / peak.max(1e-9),
             100.0 * max / peak.max(1e-9)
         );
     }
-    eprintln!(
+    tracing::info!(
         "safety: {} stale events, {} faults",
-        stats.safety.stale_events, stats.safety.faults
+        stats.safety.stale_events,
+        stats.safety.faults
     );
     let m = &stats.memory;
     if let (Some(warm), Some(end)) = (m.rss_mb_after_warmup, m.rss_mb_end) {
-        eprintln!(
+        tracing::info!(
             "memory: {warm:.1} MiB resident after warm-up, {end:.1} MiB at the end ({:+.2} MiB)",
             end - warm
         );
