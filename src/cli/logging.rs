@@ -67,7 +67,7 @@ fn stderr_is_journal(journal_stream: Option<&str>) -> bool {
     }
     // SAFETY: fstat succeeded, so the buffer is initialised.
     let st = unsafe { st.assume_init() };
-    st.st_dev as u64 == dev && st.st_ino as u64 == ino
+    st.st_dev == dev && st.st_ino == ino
 }
 
 /// What a line written to standard error outside `tracing` (the binary's final error)

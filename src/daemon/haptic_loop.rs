@@ -303,7 +303,7 @@ impl HapticLoop {
             .stale_events
             .store(counters.stale_events, Ordering::Relaxed);
         shared.faults.store(counters.faults, Ordering::Relaxed);
-        if tick % u64::from(self.options.telemetry_every.max(1)) == 0 {
+        if tick.is_multiple_of(u64::from(self.options.telemetry_every.max(1))) {
             let record = TickRecord {
                 t_s: now_s,
                 period_us,

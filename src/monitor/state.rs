@@ -174,7 +174,7 @@ impl Producer {
         });
         self.hub.broadcast(&update.to_string());
         // A new page starts from the history; refreshing it twice a second is plenty.
-        if self.steps % 5 == 0 {
+        if self.steps.is_multiple_of(5) {
             let history: Vec<[f64; 2]> = self.history.iter().chain(&self.fresh).copied().collect();
             self.hub
                 .set_hello(json!({ "force": history, "history_s": HISTORY_S }).to_string());
