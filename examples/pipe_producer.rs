@@ -57,7 +57,7 @@ fn main() -> std::io::Result<()> {
     let mut sequence = 0u64;
     for n in 0..count {
         sequence += 1;
-        if skip_every > 0 && sequence % skip_every == 0 {
+        if skip_every > 0 && sequence.is_multiple_of(skip_every) {
             sequence += 1;
         }
         let capture_ns = monotonic_ns();

@@ -46,7 +46,11 @@ impl Estimator for Tracker {
         FrameEstimate {
             detected: true,
             angle_deg: Some(1.0),
-            force_nn: Some(if self.0 % 2 == 0 { 800.0 } else { 1200.0 }),
+            force_nn: Some(if self.0.is_multiple_of(2) {
+                800.0
+            } else {
+                1200.0
+            }),
             apex_px: Some([3.0, 4.0]),
             confidence: 0.9,
         }
