@@ -253,12 +253,16 @@ fn run_suite(seed: u64) {
         "rendered {rendered_nn} nN >= {limit_nn} nN (a 0.3 deg rotation)"
     );
     assert!(s.safety.gate_held > 0, "{:?}", s.safety);
-    // The reference frames after the attack are felt again (at their ~0 nN).
+    // The reference frames after the attack are accepted again: engaged, pressing
+    // allowed, in the last quarter of the run.
     let ticks_csv = std::fs::read_to_string(session.join("ticks.csv")).unwrap();
-    let last = ticks_csv.lines().last().unwrap();
+    let rows: Vec<&str> = ticks_csv.lines().skip(1).collect();
+    let tail = &rows[rows.len() * 3 / 4..];
+    let free = tail.iter().filter(|r| r.contains(",engaged,0,")).count();
     assert!(
-        last.contains(",engaged,0,"),
-        "engaged, not blocked, at the end: {last}"
+        free > tail.len() / 4,
+        "{free} of {} late ticks free to press",
+        tail.len()
     );
 }
 

@@ -5,9 +5,13 @@
 //! k being the cantilever's spring constant (EI = k L^3 / 3).
 //!
 //! - An estimate within that bound of the last accepted one is accepted.
-//! - A larger jump is held ("unconfirmed", not rendered) until `confirm_frames`
-//!   consecutive held estimates are each within the bound of the one before: then the
-//!   newest is accepted and fades in.
+//! - A larger jump is held ("unconfirmed", not rendered). A jump toward zero force (a
+//!   release: the tip springs back, slips, leaves the sample) and the first force after
+//!   start are confirmed when `confirm_frames` consecutive held estimates are each
+//!   within the bound of the one before: then the newest is accepted and fades in. A
+//!   jump away from zero stays held until the commanded travel explains it (the
+//!   operator's motion widens the bound), so a false bend that persists, frame after
+//!   frame, is never felt.
 //! - After a miss (or before any estimate was accepted) the next accepted force fades in.
 //! - A force whose angle sigma exceeds `full_sigma_deg` is rendered attenuated, by
 //!   (full_sigma / sigma)^2; a vague estimate never buys a larger jump allowance than
@@ -152,7 +156,7 @@ impl Gate {
             Some((prev, n)) if self.within_bound(&prev, &candidate, travel_now_um) => n + 1,
             _ => 1,
         };
-        if run >= self.limits.confirm_frames {
+        if run >= self.limits.confirm_frames && self.confirmable(&candidate) {
             self.streak = None;
             self.counters.confirmed += 1;
             return self.accept(candidate, true);
@@ -170,6 +174,22 @@ impl Gate {
             |c: &Candidate| c.sigma_nn * (self.limits.full_sigma_deg / c.angle_sigma_deg).min(1.0);
         let sigma_nn = sigma(from).hypot(sigma(to));
         self.stiffness_nn_per_um * travel_um + self.limits.sigmas * sigma_nn
+    }
+
+    /// Whether agreeing frames alone may confirm a jump to `to`: before anything was
+    /// accepted (the probe may start in contact), or toward zero force (a release: the
+    /// tip springs back, slips or leaves the sample, no stage motion needed). A jump
+    /// away from zero needs the stage to have pushed: it stays held until the commanded
+    /// travel explains it, so a false bend that persists is never felt.
+    fn confirmable(&self, to: &Candidate) -> bool {
+        match &self.accepted {
+            None => true,
+            Some(from) => {
+                let slack_nn = self.limits.sigmas * from.sigma_nn.hypot(to.sigma_nn);
+                to.force_nn.abs() <= from.force_nn.abs() + slack_nn
+                    && to.force_nn * from.force_nn.signum() >= -slack_nn
+            }
+        }
     }
 
     fn within_bound(&self, from: &Candidate, to: &Candidate, travel_now_um: f64) -> bool {
@@ -279,16 +299,13 @@ mod tests {
     }
 
     #[test]
-    fn a_jump_is_confirmed_after_n_agreeing_frames_and_fades_in() {
-        let mut gate = accepted_at(0.0);
+    fn a_release_is_confirmed_after_n_agreeing_frames_and_fades_in() {
+        let mut gate = accepted_at(900.0);
         for _ in 1..GateLimits::default().confirm_frames {
-            assert_eq!(
-                gate.judge(candidate(900.0, 0.02, 0.0), 0.0),
-                Judgement::Held
-            );
+            assert_eq!(gate.judge(candidate(0.0, 0.02, 0.0), 0.0), Judgement::Held);
         }
         assert_eq!(
-            gate.judge(candidate(900.0, 0.02, 0.0), 0.0),
+            gate.judge(candidate(0.0, 0.02, 0.0), 0.0),
             Judgement::Accept {
                 weight: 1.0,
                 fade_in: true
@@ -296,7 +313,7 @@ mod tests {
         );
         assert_eq!(gate.counters().confirmed, 2);
         // Frames that disagree with each other never confirm.
-        let mut gate = accepted_at(0.0);
+        let mut gate = accepted_at(3000.0);
         for (i, force) in [900.0, 1500.0, 700.0, 1200.0, 950.0, 2000.0]
             .iter()
             .enumerate()
@@ -304,6 +321,27 @@ mod tests {
             let judged = gate.judge(candidate(*force, 0.02, 0.0), 0.0);
             assert_eq!(judged, Judgement::Held, "frame {i}");
         }
+    }
+
+    #[test]
+    fn a_persistent_jump_away_from_zero_waits_for_stage_travel() {
+        let mut gate = accepted_at(0.0);
+        for _ in 0..20 {
+            assert_eq!(
+                gate.judge(candidate(900.0, 0.02, 0.0), 0.0),
+                Judgement::Held
+            );
+        }
+        // Nor across zero to the other side.
+        assert_eq!(
+            gate.judge(candidate(-900.0, 0.02, 0.0), 0.0),
+            Judgement::Held
+        );
+        // 15 um of commanded travel explain 900 nN at 60 nN/um.
+        assert!(matches!(
+            gate.judge(candidate(900.0, 0.02, 0.0), 15.0),
+            Judgement::Accept { fade_in: false, .. }
+        ));
     }
 
     #[test]
