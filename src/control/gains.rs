@@ -112,7 +112,8 @@ pub struct GateLimits {
     /// Up to this angle sigma a force is rendered in full; above it the force is scaled
     /// by (this / sigma)^2, and the sigma allowance of the jump bound stops growing.
     pub full_sigma_deg: f64,
-    /// A larger jump is rendered once this many consecutive frames agree with it.
+    /// A larger jump toward zero (a release), or the first force after start, is
+    /// rendered once this many consecutive frames agree with it.
     pub confirm_frames: u32,
     /// A re-acquired or newly confirmed force fades in over this time.
     pub fade_in_ms: f64,
