@@ -258,11 +258,12 @@ impl Config {
             Some(raw) => check.tracker(raw)?,
             None => TrackerConfig::default(),
         };
-        let teleop = TeleopGains::validate(
+        let mut teleop = TeleopGains::validate(
             raw.teleop.unwrap_or_default(),
             raw.safety.unwrap_or_default(),
             &check,
         )?;
+        teleop.cantilever = cantilever;
         let devices = DevicesConfig::validate(
             raw.frames.unwrap_or_default(),
             raw.daq.unwrap_or_default(),

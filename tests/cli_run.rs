@@ -92,7 +92,10 @@ fn duration_and_stats_json() {
             "force",
             &["samples", "true_peak_nN", "rms_error_nN", "max_error_nN"],
         ),
-        ("safety", &["stale_events", "faults"]),
+        (
+            "safety",
+            &["stale_events", "faults", "gate_held", "gate_attenuated"],
+        ),
     ] {
         for key in keys {
             assert!(

@@ -228,6 +228,7 @@ fn detected(force_nn: f64) -> Option<FrameEstimate> {
         force_nn: Some(force_nn),
         apex_px: Some([1.0, 1.0]),
         confidence: 1.0,
+        angle_sigma_deg: Some(0.02),
     })
 }
 
@@ -364,7 +365,8 @@ fn stale_estimates_fade_the_force_and_block_pressing() {
     *lab.estimate.lock().unwrap() = detected(1000.0);
     let handle = start(&lab, 10);
     wait_for_state(&handle, SafetyState::Engaged);
-    sleep_ms(100);
+    // Four agreeing frames confirm the first force, which then fades in over 150 ms.
+    sleep_ms(300);
     // 1000 nN at 1e-3 N/nN pushes back along +z (pressing is stage -z).
     assert!(
         (lab.last_force().z - 1.0).abs() < 0.02,

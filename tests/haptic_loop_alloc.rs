@@ -38,21 +38,24 @@ impl FrameSource for Frames {
     }
 }
 
-/// Alternates the force so the ramp keeps retargeting.
+/// Alternates the force so the ramp keeps retargeting, and every third frame jumps
+/// far enough for the plausibility gate to hold it.
 struct Tracker(u64);
 impl Estimator for Tracker {
     fn estimate(&mut self, _frame: &GrayImage) -> FrameEstimate {
         self.0 += 1;
+        let force_nn = match self.0 % 6 {
+            0 | 3 => 3000.0,
+            1 | 5 => 1000.0,
+            _ => 1010.0,
+        };
         FrameEstimate {
             detected: true,
-            angle_deg: Some(1.0),
-            force_nn: Some(if self.0.is_multiple_of(2) {
-                800.0
-            } else {
-                1200.0
-            }),
+            angle_deg: None,
+            force_nn: Some(force_nn),
             apex_px: Some([3.0, 4.0]),
             confidence: 0.9,
+            angle_sigma_deg: Some(0.05),
         }
     }
 }
@@ -126,6 +129,8 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
     std::thread::sleep(Duration::from_millis(700));
     let loop_allocations = alloc_counter::stop();
     let ticks = handle.loop_shared.ticks.load(Ordering::SeqCst) - ticks_before;
+    let held = handle.loop_shared.gate_held.load(Ordering::SeqCst);
+    assert!(held > 0, "the gate's held path ran too");
     handle.stop();
     handle.wait().unwrap();
     assert!(ticks > 400, "the loop ran ({ticks} ticks)");

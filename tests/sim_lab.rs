@@ -1,8 +1,12 @@
 //! End to end: the built-in simulated lab through the real daemon (threads, tracker,
 //! haptic loop, simulated S100, SEM and operator), checked against the daemon issue's
-//! targets. Release build, 640x480 at 60 Hz. One test in its own binary, so nothing
-//! else competes for the two cores while it runs.
+//! targets. Release build, 640x480. The shipped lab (60 Hz) for 12 s, then short runs at
+//! SEM frame rates of 12, 24 and 60 frames per second with 20 and 80 ms from capture to
+//! arrival, and a slow scan. The tests of this binary take turns (one lock), so nothing
+//! else competes for the two cores while one runs.
 use std::path::Path;
+use std::sync::atomic::Ordering;
+use std::sync::Mutex;
 use std::time::Duration;
 
 use nanoforce::cli::run::SIM_CONFIG;
@@ -10,8 +14,12 @@ use nanoforce::config::Config;
 use nanoforce::daemon::{lab, Daemon, ExitReason, RunOptions};
 use nanoforce::hw::Clock;
 
+/// One simulated lab at a time.
+static LAB: Mutex<()> = Mutex::new(());
+
 #[test]
 fn simulated_lab_meets_the_force_and_timing_targets() {
+    let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
     let config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml")).unwrap();
     let clock = Clock::start();
     let devices = lab::open(&config, clock).unwrap();
@@ -90,6 +98,128 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
         (900.0..=1100.0).contains(&p99),
         "haptic period p99 {p99} us"
     );
+}
+
+/// The shipped lab with the SEM at `rate_hz` and `delay_ms`, a short task: contact 5 um
+/// away, a press to 2 uN, no magnification change.
+fn short_lab(rate_hz: f64, delay_ms: f64) -> Config {
+    let mut config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml")).unwrap();
+    config.sim.sem.rate_hz = rate_hz;
+    config.sim.sem.delay_ms = delay_ms;
+    config.sim.sem.magnification = vec![(0.0, 3500.0)];
+    config.sim.sample.contact_at_um = 5.0;
+    config.sim.operator.target_force_nn = 2000.0;
+    config.sim.operator.hold_s = 1.0;
+    config
+}
+
+/// Runs `config` for `duration_s` and returns its stats.
+fn run(config: &Config, duration_s: f64) -> nanoforce::daemon::stats::RunStats {
+    let clock = Clock::start();
+    let devices = lab::open(config, clock).unwrap();
+    let options = RunOptions {
+        duration: Some(Duration::from_secs_f64(duration_s)),
+        loop_options: config.daemon.loop_options.clone(),
+        clock,
+        ..RunOptions::default()
+    };
+    let outcome = Daemon::start(config.teleop.clone(), devices, options)
+        .unwrap()
+        .wait()
+        .unwrap();
+    assert_eq!(outcome.exit, ExitReason::Duration);
+    outcome.stats
+}
+
+/// The SEM at `rate_hz` with `delay_ms`: force targets, the press reached, no stale event.
+fn frame_rate_case(rate_hz: f64, delay_ms: f64) {
+    let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
+    let s = run(&short_lab(rate_hz, delay_ms), 7.0);
+    eprintln!(
+        "{rate_hz} Hz, {delay_ms} ms: {}",
+        serde_json::to_string(&s).unwrap()
+    );
+    let peak = s.force.true_peak_nn.unwrap();
+    assert!(peak > 1700.0, "the operator pressed to ~2 uN: peak {peak}");
+    let rms = s.force.rms_error_nn.unwrap();
+    let max = s.force.max_error_nn.unwrap();
+    assert!(
+        rms <= 0.02 * peak,
+        "force rms error {rms} nN > 2 % of {peak}"
+    );
+    assert!(
+        max <= 0.05 * peak,
+        "force max error {max} nN > 5 % of {peak}"
+    );
+    assert_eq!(
+        s.safety.stale_events, 0,
+        "frames stream steadily: {:?}",
+        s.safety
+    );
+    assert_eq!(s.safety.faults, 0);
+    // Real contact is never held: only the frames that confirm the first force after
+    // start (confirm_frames - 1 of them).
+    assert!(s.safety.gate_held <= 3, "{:?}", s.safety);
+    let expected_frames = rate_hz * 7.0;
+    assert!(
+        s.frames.received as f64 >= 0.9 * expected_frames,
+        "{:?}",
+        s.frames
+    );
+}
+
+#[test]
+fn twelve_frames_per_second_with_20_ms_delay() {
+    frame_rate_case(12.0, 20.0);
+}
+
+#[test]
+fn twelve_frames_per_second_with_80_ms_delay() {
+    frame_rate_case(12.0, 80.0);
+}
+
+#[test]
+fn twenty_four_frames_per_second_with_20_ms_delay() {
+    frame_rate_case(24.0, 20.0);
+}
+
+#[test]
+fn twenty_four_frames_per_second_with_80_ms_delay() {
+    frame_rate_case(24.0, 80.0);
+}
+
+#[test]
+fn sixty_frames_per_second_with_80_ms_delay() {
+    frame_rate_case(60.0, 80.0);
+}
+
+/// A slow scan (1.5 frames per second) gives no force feedback: positioning only, the
+/// approach refused, so the probe never presses; no stale events are counted for it.
+#[test]
+fn a_slow_scan_refuses_force_feedback() {
+    let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
+    let config = short_lab(1.5, 50.0);
+    let clock = Clock::start();
+    let devices = lab::open(&config, clock).unwrap();
+    let options = RunOptions {
+        duration: Some(Duration::from_secs(5)),
+        loop_options: config.daemon.loop_options.clone(),
+        clock,
+        ..RunOptions::default()
+    };
+    let handle = Daemon::start(config.teleop.clone(), devices, options).unwrap();
+    std::thread::sleep(Duration::from_secs(3));
+    assert!(
+        handle.loop_shared.slow_frames.load(Ordering::Relaxed),
+        "a slow scan is recognised"
+    );
+    let period_ms = handle.loop_shared.frame_period_us.load(Ordering::Relaxed) as f64 * 1e-3;
+    assert!((600.0..=700.0).contains(&period_ms), "{period_ms} ms");
+    let s = handle.wait().unwrap().stats;
+    eprintln!("slow scan: {}", serde_json::to_string(&s).unwrap());
+    let peak = s.force.true_peak_nn.unwrap();
+    assert!(peak < 1.0, "the probe never pressed: {peak} nN");
+    assert!(s.safety.stale_events <= 1, "{:?}", s.safety);
 }
 
 /// Above this share of CPU time taken by the host, timing is not the daemon's to meet.

@@ -6,8 +6,11 @@
 use nalgebra::Vector3;
 
 use super::gains::TeleopGains;
+use super::gate::{Candidate, Gate, GateCounters, Judgement};
 use super::ramp::Ramp;
 use super::safety::{Facts, PressBlock, Safety, SafetyCounters, SafetyState, Verdict};
+use super::timing::{FrameTiming, TravelLog};
+use crate::model::ModelTable;
 
 /// The stylus as read this tick (haptic frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,6 +29,10 @@ pub struct SensedForce {
     pub detected: bool,
     /// Signed as the tip angle; meaningful only when `detected`.
     pub force_nn: f64,
+    /// The tip angle, degrees (NaN: unknown).
+    pub angle_deg: f64,
+    /// The angle's standard error, degrees (NaN: unknown).
+    pub angle_sigma_deg: f64,
 }
 
 /// Everything the law needs for one tick.
@@ -55,30 +62,64 @@ pub struct TickOutput {
 /// Nominal interval between estimates before any have been seen (SEM at 60 Hz).
 const DEFAULT_FRAME_INTERVAL_S: f64 = 1.0 / 60.0;
 
+/// The stage follows its velocity command within this time (the S100's lag is ~15 ms):
+/// travel commanded this long before a frame's capture may still show in it.
+const STAGE_SETTLE_S: f64 = 0.1;
+
+/// The last estimate the gate accepted, as the safety rules see it.
+#[derive(Debug, Clone, Copy)]
+struct Accepted {
+    frame_time_s: f64,
+    force_nn: f64,
+}
+
 #[derive(Debug, Clone)]
 pub struct Controller {
     gains: TeleopGains,
     safety: Safety,
+    gate: Gate,
+    timing: FrameTiming,
+    travel: TravelLog,
     sensed: Ramp,
     last_seq: Option<u64>,
-    last_estimate_s: Option<f64>,
-    frame_interval_s: f64,
+    accepted: Option<Accepted>,
+    /// The newest estimate was a miss (not detected): nothing fresh until one is accepted.
+    missed: bool,
     last_now_s: Option<f64>,
+    last_speed_um_s: f64,
+    /// A fade-in lasts until then: later estimates do not shorten it.
+    fade_in_until_s: f64,
     last_force_n: Vector3<f64>,
 }
 
 impl Controller {
     pub fn new(gains: TeleopGains) -> Self {
+        // The cantilever table is built here, not on the loop thread's first estimate.
+        let _ = ModelTable::global();
         Controller {
             safety: Safety::new(gains.safety.clone()),
+            gate: Gate::new(gains.safety.gate.clone(), &gains.cantilever),
             gains,
+            timing: FrameTiming::default(),
+            travel: TravelLog::default(),
             sensed: Ramp::new(0.0),
             last_seq: None,
-            last_estimate_s: None,
-            frame_interval_s: DEFAULT_FRAME_INTERVAL_S,
+            accepted: None,
+            missed: true,
             last_now_s: None,
+            last_speed_um_s: 0.0,
+            fade_in_until_s: f64::NEG_INFINITY,
             last_force_n: Vector3::zeros(),
         }
+    }
+
+    pub fn gate_counters(&self) -> GateCounters {
+        self.gate.counters()
+    }
+
+    /// The frame source's period and delay as measured from the estimates.
+    pub fn frame_timing(&self) -> FrameTiming {
+        self.timing
     }
 
     pub fn gains(&self) -> &TeleopGains {
@@ -88,6 +129,7 @@ impl Controller {
     /// New gains (SIGHUP). Motion stops until the stylus is re-centred.
     pub fn set_gains(&mut self, gains: TeleopGains) {
         self.safety.set_limits(gains.safety.clone());
+        self.gate.set_limits(gains.safety.gate.clone());
         self.safety.stop();
         self.gains = gains;
     }
@@ -101,20 +143,29 @@ impl Controller {
     }
 
     pub fn tick(&mut self, input: &TickInput) -> TickOutput {
-        let dt_s = match self.last_now_s {
-            Some(last) => (input.now_s - last).clamp(0.0, 0.1),
-            None => 0.0,
-        };
+        let since_last_s = self
+            .last_now_s
+            .map_or(0.0, |last| (input.now_s - last).max(0.0));
+        let dt_s = since_last_s.min(0.1);
         self.last_now_s = Some(input.now_s);
+        // The stage moved for all of a late tick: the travel is not clamped.
+        self.travel
+            .push(input.now_s, self.last_speed_um_s, since_last_s);
+        if let Some(estimate) = input.estimate {
+            self.follow_estimate(input.now_s, &estimate);
+        }
         let facts = self.facts(input);
         let verdict = self.safety.evaluate(facts);
-        self.follow_estimate(input, verdict.fresh);
+        if !verdict.fresh {
+            self.fade();
+        }
         let rendered_force_nn = self.sensed.advance(dt_s);
         let Some(haptic) = input
             .haptic
             .filter(|_| verdict.state != SafetyState::HapticFault)
         else {
             self.last_force_n = Vector3::zeros();
+            self.last_speed_um_s = 0.0;
             return TickOutput {
                 force_n: Vector3::zeros(),
                 forces_enabled: false,
@@ -125,6 +176,7 @@ impl Controller {
             };
         };
         let stage_velocity_um_s = self.stage_velocity(&haptic, &verdict);
+        self.last_speed_um_s = stage_velocity_um_s.norm();
         let force_n = self.stylus_force(&haptic, rendered_force_nn, dt_s);
         TickOutput {
             force_n,
@@ -138,10 +190,10 @@ impl Controller {
 
     fn facts(&self, input: &TickInput) -> Facts {
         let limits = self.safety.limits();
-        let fresh_estimate = input.estimate.filter(|e| {
-            e.detected
-                && e.force_nn.is_finite()
-                && (input.now_s - e.frame_time_s) * 1e3 <= limits.stale_after_ms
+        let slow_frames = self.timing.too_slow(limits);
+        let stale_after_s = self.timing.stale_after_s(limits);
+        let fresh_estimate = self.accepted.filter(|a| {
+            !self.missed && !slow_frames && input.now_s - a.frame_time_s <= stale_after_s
         });
         let centred = input
             .haptic
@@ -151,32 +203,55 @@ impl Controller {
             daq_ok: input.daq_ok,
             centred,
             fresh: fresh_estimate.is_some(),
+            slow_frames,
             contact_nn: fresh_estimate.map_or(0.0, |e| e.force_nn * self.gains.pressing_force_sign),
         }
     }
 
-    /// A new fresh estimate becomes the ramp's target, reached one frame interval later;
-    /// losing it starts the fade to zero (once, so the fade keeps its rate).
-    fn follow_estimate(&mut self, input: &TickInput, fresh: bool) {
-        let Some(estimate) = input.estimate else {
-            self.fade();
-            return;
-        };
-        if !fresh {
-            self.fade();
-            return;
-        }
-        if self.last_seq == Some(estimate.seq) {
+    /// A new estimate: timed, then judged by the plausibility gate. An accepted one
+    /// becomes the ramp's target (weighted by its sigma), reached one frame period later,
+    /// or over `fade_in_ms` when re-acquired or newly confirmed; a held one changes
+    /// nothing; a miss starts the fade.
+    fn follow_estimate(&mut self, now_s: f64, estimate: &SensedForce) {
+        if self.last_seq == Some(estimate.seq) || estimate.seq == 0 {
             return;
         }
         self.last_seq = Some(estimate.seq);
-        if let Some(prev) = self.last_estimate_s {
-            let interval = (input.now_s - prev).clamp(0.001, 0.25);
-            self.frame_interval_s += 0.2 * (interval - self.frame_interval_s);
+        self.timing.observe(estimate.frame_time_s, now_s);
+        if !(estimate.detected && estimate.force_nn.is_finite()) {
+            self.missed = true;
+            self.gate.miss();
+            return;
         }
-        self.last_estimate_s = Some(input.now_s);
-        self.sensed
-            .retarget(estimate.force_nn, self.frame_interval_s);
+        let candidate = Candidate::new(
+            estimate.force_nn,
+            estimate.angle_deg,
+            estimate.angle_sigma_deg,
+            self.gate.limits(),
+            &self.gains.cantilever,
+            self.travel.at(estimate.frame_time_s - STAGE_SETTLE_S),
+        );
+        match self.gate.judge(candidate, self.travel.total_um()) {
+            Judgement::Held => {}
+            Judgement::Accept { weight, fade_in } => {
+                self.missed = false;
+                self.accepted = Some(Accepted {
+                    frame_time_s: estimate.frame_time_s,
+                    force_nn: estimate.force_nn,
+                });
+                if fade_in {
+                    self.fade_in_until_s = now_s + self.gate.limits().fade_in_ms * 1e-3;
+                }
+                // One frame period, or what is left of a fade-in.
+                let period_s = self
+                    .timing
+                    .period_s()
+                    .unwrap_or(DEFAULT_FRAME_INTERVAL_S)
+                    .min(0.25);
+                let duration_s = period_s.max(self.fade_in_until_s - now_s);
+                self.sensed.retarget(estimate.force_nn * weight, duration_s);
+            }
+        }
     }
 
     fn fade(&mut self) {

@@ -10,6 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
 use crate::config::{Checker, ConfigError};
+use crate::model::Cantilever;
 
 /// Raw `[teleop]` section; every field optional, defaults in [`TeleopGains::default`].
 #[derive(Debug, Default, Deserialize)]
@@ -37,6 +38,14 @@ pub(crate) struct RawSafety {
     fade_ms: Option<f64>,
     max_contact_force_nn: Option<f64>,
     recentre_radius_mm: Option<f64>,
+    // The plausibility gate and the frame timing (defaults in `SafetyLimits::default`).
+    gate_sigmas: Option<f64>,
+    gate_min_sigma_deg: Option<f64>,
+    gate_full_sigma_deg: Option<f64>,
+    gate_confirm_frames: Option<u32>,
+    gate_fade_in_ms: Option<f64>,
+    stale_period_margin: Option<f64>,
+    max_frame_period_ms: Option<f64>,
 }
 
 /// Validated teleoperation law parameters.
@@ -65,6 +74,10 @@ pub struct TeleopGains {
     /// Slew limit of the total force.
     pub force_rate_n_per_s: f64,
     pub safety: SafetyLimits,
+    /// The probe's cantilever (from `[cantilever]`, not reloaded): its spring constant
+    /// bounds how fast the sensed force can change, its table turns angle sigmas into
+    /// force sigmas. Default: the built-in simulated lab's probe.
+    pub cantilever: Cantilever,
 }
 
 /// Validated `[safety]` section.
@@ -78,6 +91,44 @@ pub struct SafetyLimits {
     pub max_contact_force_nn: f64,
     /// The stylus is "back at the centre" (deadman re-engage) within this radius.
     pub recentre_radius_mm: f64,
+    /// The plausibility gate between the estimate and the rendered force.
+    pub gate: GateLimits,
+    /// An estimate is stale when older than max(`stale_after_ms`, this many measured
+    /// frame periods + the measured capture-to-arrival delay).
+    pub stale_period_margin: f64,
+    /// Frames further apart than this (a slow scan) refuse force feedback: positioning
+    /// only, pressing refused.
+    pub max_frame_period_ms: f64,
+}
+
+/// How the plausibility gate judges an estimate (see [`super::gate`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GateLimits {
+    /// Allowed change: k x commanded stage travel + this many force sigmas.
+    pub sigmas: f64,
+    /// Floor of the angle sigma an estimate is judged with (and the sigma of an
+    /// estimate that has none), degrees.
+    pub min_sigma_deg: f64,
+    /// Up to this angle sigma a force is rendered in full; above it the force is scaled
+    /// by (this / sigma)^2, and the sigma allowance of the jump bound stops growing.
+    pub full_sigma_deg: f64,
+    /// A larger jump toward zero (a release), or the first force after start, is
+    /// rendered once this many consecutive frames agree with it.
+    pub confirm_frames: u32,
+    /// A re-acquired or newly confirmed force fades in over this time.
+    pub fade_in_ms: f64,
+}
+
+impl Default for GateLimits {
+    fn default() -> Self {
+        GateLimits {
+            sigmas: 4.0,
+            min_sigma_deg: 0.02,
+            full_sigma_deg: 0.1,
+            confirm_frames: 4,
+            fade_in_ms: 150.0,
+        }
+    }
 }
 
 impl Default for TeleopGains {
@@ -96,6 +147,10 @@ impl Default for TeleopGains {
             max_force_n: 3.0,
             force_rate_n_per_s: 60.0,
             safety: SafetyLimits::default(),
+            cantilever: Cantilever::new(
+                434.675,
+                Cantilever::rigidity_from_spring_constant(0.06, 434.675),
+            ),
         }
     }
 }
@@ -107,6 +162,9 @@ impl Default for SafetyLimits {
             fade_ms: 200.0,
             max_contact_force_nn: 10_000.0,
             recentre_radius_mm: 1.5,
+            gate: GateLimits::default(),
+            stale_period_margin: 2.0,
+            max_frame_period_ms: 250.0,
         }
     }
 }
@@ -128,6 +186,7 @@ impl TeleopGains {
         check: &Checker,
     ) -> Result<TeleopGains, ConfigError> {
         let d = TeleopGains::default();
+        let dg = &d.safety.gate;
         let pos = |key: &str, v: Option<f64>, default: f64| match v {
             Some(v) => check.positive(key, v),
             None => Ok(default),
@@ -167,6 +226,45 @@ impl TeleopGains {
                 "safety.recentre_radius_mm",
                 safety.recentre_radius_mm,
                 d.safety.recentre_radius_mm,
+            )?,
+            gate: GateLimits {
+                sigmas: pos("safety.gate_sigmas", safety.gate_sigmas, dg.sigmas)?,
+                min_sigma_deg: pos(
+                    "safety.gate_min_sigma_deg",
+                    safety.gate_min_sigma_deg,
+                    dg.min_sigma_deg,
+                )?,
+                full_sigma_deg: pos(
+                    "safety.gate_full_sigma_deg",
+                    safety.gate_full_sigma_deg,
+                    dg.full_sigma_deg,
+                )?,
+                confirm_frames: match safety.gate_confirm_frames {
+                    None => dg.confirm_frames,
+                    Some(n @ 1..=100) => n,
+                    Some(n) => {
+                        return Err(check.invalid(
+                            "safety.gate_confirm_frames",
+                            n,
+                            "must be in [1, 100] frames",
+                        ))
+                    }
+                },
+                fade_in_ms: pos(
+                    "safety.gate_fade_in_ms",
+                    safety.gate_fade_in_ms,
+                    dg.fade_in_ms,
+                )?,
+            },
+            stale_period_margin: pos(
+                "safety.stale_period_margin",
+                safety.stale_period_margin,
+                d.safety.stale_period_margin,
+            )?,
+            max_frame_period_ms: pos(
+                "safety.max_frame_period_ms",
+                safety.max_frame_period_ms,
+                d.safety.max_frame_period_ms,
             )?,
         };
         let gains = TeleopGains {
@@ -216,6 +314,7 @@ impl TeleopGains {
                 d.force_rate_n_per_s,
             )?,
             safety,
+            cantilever: d.cantilever,
         };
         let min_deadband = gains.deadband_mm.min();
         if gains.safety.recentre_radius_mm > min_deadband {
@@ -246,7 +345,11 @@ mod tests {
     #[test]
     fn defaults_are_valid_and_documented_values() {
         let cfg = Config::from_toml_str(CANTILEVER, Path::new("lab.toml")).unwrap();
-        assert_eq!(cfg.teleop, super::TeleopGains::default());
+        let defaults = super::TeleopGains {
+            cantilever: cfg.cantilever,
+            ..super::TeleopGains::default()
+        };
+        assert_eq!(cfg.teleop, defaults);
         assert_eq!(cfg.teleop.period_us(), 1000.0);
     }
 

@@ -1,7 +1,8 @@
 //! The safety rules of teleoperation as one state machine, evaluated every haptic tick:
 //!
-//! - a stale or undetected estimate blocks motion toward the sample (the sensed force
-//!   fades, see [`super::Controller`]);
+//! - a stale, undetected or unconfirmed estimate blocks motion toward the sample (the
+//!   sensed force fades, see [`super::Controller`]); so do frames too slow for force
+//!   feedback (a slow scan);
 //! - a sensed force above the limit blocks motion that would press harder;
 //! - a lost haptic device or a failed DAQ write is a fault: zero velocity at once;
 //! - after any stop or fault, motion resumes only once the stylus is back at the centre
@@ -41,6 +42,9 @@ pub enum PressBlock {
     Stale,
     /// The sensed force is above `max_contact_force_nn`.
     ForceLimit,
+    /// Frames come further apart than `max_frame_period_ms` (a slow scan): no force
+    /// feedback, positioning only.
+    SlowFrames,
 }
 
 impl PressBlock {
@@ -48,6 +52,7 @@ impl PressBlock {
         match self {
             PressBlock::Stale => "stale-estimate",
             PressBlock::ForceLimit => "force-limit",
+            PressBlock::SlowFrames => "slow-frames",
         }
     }
 }
@@ -83,8 +88,11 @@ pub struct Facts {
     pub daq_ok: bool,
     /// The stylus is within the re-centre radius.
     pub centred: bool,
-    /// A detected estimate no older than `stale_after_ms`.
+    /// An accepted estimate, the newest detected, not stale (see
+    /// [`super::timing::FrameTiming::stale_after_s`]).
     pub fresh: bool,
+    /// Frames come too slowly for force feedback (never counted as stale events).
+    pub slow_frames: bool,
     /// The contact force of the newest fresh estimate (positive = pressing), nN.
     pub contact_nn: f64,
 }
@@ -180,11 +188,15 @@ impl Safety {
 
     fn update_freshness(&mut self, facts: Facts) {
         if !facts.fresh {
-            if self.was_fresh {
+            if self.was_fresh && !facts.slow_frames {
                 self.counters.stale_events += 1;
             }
             if self.latched != Some(PressBlock::ForceLimit) {
-                self.latched = Some(PressBlock::Stale);
+                self.latched = Some(if facts.slow_frames {
+                    PressBlock::SlowFrames
+                } else {
+                    PressBlock::Stale
+                });
                 self.latched_sign = 1.0;
             }
         }
@@ -204,7 +216,7 @@ impl Safety {
     fn cause_cleared(&self, facts: Facts) -> bool {
         match self.latched {
             None => true,
-            Some(PressBlock::Stale) => facts.fresh,
+            Some(PressBlock::Stale | PressBlock::SlowFrames) => facts.fresh,
             Some(PressBlock::ForceLimit) => {
                 facts.fresh && facts.contact_nn.abs() <= self.limits.max_contact_force_nn
             }

@@ -1,4 +1,6 @@
-//! The teleoperation law and each safety rule, tick by tick.
+//! The teleoperation law and each safety rule, tick by tick. The law's own tests pass
+//! every estimate through the plausibility gate (a bound of 1e9 sigmas, a 16 ms
+//! fade-in); the gate's holding, confirming and fading are tested at the end.
 use nalgebra::Vector3;
 
 use super::*;
@@ -19,6 +21,31 @@ fn gains() -> TeleopGains {
         force_rate_n_per_s: 1e6,
         ..TeleopGains::default()
     }
+    .with_gate(GateLimits {
+        sigmas: 1e9,
+        confirm_frames: 1,
+        fade_in_ms: 16.0,
+        ..GateLimits::default()
+    })
+}
+
+/// The shipped gate.
+fn gated() -> TeleopGains {
+    TeleopGains {
+        safety: SafetyLimits::default(),
+        ..gains()
+    }
+}
+
+trait WithGate {
+    fn with_gate(self, gate: GateLimits) -> Self;
+}
+
+impl WithGate for TeleopGains {
+    fn with_gate(mut self, gate: GateLimits) -> Self {
+        self.safety.gate = gate;
+        self
+    }
 }
 
 /// Drives a controller with a stylus position and a 60 Hz estimate stream.
@@ -34,8 +61,12 @@ struct Bench {
 
 impl Bench {
     fn new() -> Self {
+        Bench::with(gains())
+    }
+
+    fn with(gains: TeleopGains) -> Self {
         Bench {
-            c: Controller::new(gains()),
+            c: Controller::new(gains),
             now_s: 0.0,
             seq: 0,
             estimate: None,
@@ -53,6 +84,8 @@ impl Bench {
             frame_time_s: self.now_s - age_s,
             detected,
             force_nn,
+            angle_deg: f64::NAN,
+            angle_sigma_deg: 0.02,
         });
     }
 
@@ -142,6 +175,8 @@ fn springs_centre_the_stylus() {
 fn sensed_force_is_rendered_against_pressing_without_steps() {
     let mut b = Bench::new();
     b.engage();
+    // The next frame of a 60 Hz stream.
+    b.run(15);
     b.publish(1000.0, true, 0.0);
     let mut previous = b.tick().force_n.z;
     let mut largest_step: f64 = 0.0;
@@ -291,4 +326,138 @@ fn new_gains_stop_motion_until_recentred() {
     assert!(b.tick().stage_velocity_um_s.x > 0.0);
     b.c.set_gains(gains());
     assert_eq!(b.tick().stage_velocity_um_s, Vector3::zeros());
+}
+
+/// Publishes `force_nn` as a 60 Hz stream for `frames` frames, ticking in between.
+fn stream(b: &mut Bench, force_nn: f64, sigma_deg: f64, frames: usize) -> TickOutput {
+    let mut out = b.tick();
+    for _ in 0..frames {
+        b.publish(force_nn, true, 0.0);
+        if let Some(e) = b.estimate.as_mut() {
+            e.angle_sigma_deg = sigma_deg;
+        }
+        out = b.run(17);
+    }
+    out
+}
+
+/// The force of a `angle_deg` rotation of the default cantilever.
+fn force_at(angle_deg: f64) -> f64 {
+    TeleopGains::default().cantilever.force_nn(angle_deg).value
+}
+
+#[test]
+fn the_gate_holds_a_jump_without_stage_travel_and_fades_in_once_confirmed() {
+    let mut b = Bench::with(gated());
+    b.position_mm = Vector3::zeros();
+    // The first force is confirmed by four agreeing frames, then fades in over 150 ms.
+    let out = stream(&mut b, 0.0, 0.02, 4);
+    assert_eq!(out.press_block, None, "{out:?}");
+    let out = stream(&mut b, 0.0, 0.02, 10);
+    assert_eq!(out.rendered_force_nn, 0.0);
+    // A false detection of a 15 deg bend, frame after frame at random-looking angles:
+    // held, never rendered, counted.
+    let mut largest: f64 = 0.0;
+    for angle in [15.0, -12.0, 18.5, 11.0, -19.0, 13.3, 16.1, -10.4] {
+        let out = stream(&mut b, force_at(angle), 0.03, 1);
+        largest = largest.max(out.rendered_force_nn.abs());
+    }
+    assert_eq!(largest, 0.0);
+    // Three held while the first force was confirmed, eight false bends.
+    assert_eq!(b.c.gate_counters().held, 3 + 8);
+    // A false bend that persists frame after frame, with no stage motion, is never felt.
+    let jump = force_at(1.0);
+    let out = stream(&mut b, jump, 0.02, 20);
+    assert_eq!(out.rendered_force_nn, 0.0);
+    assert_eq!(b.c.gate_counters().held, 3 + 8 + 20);
+    assert_eq!(
+        out.press_block,
+        Some(PressBlock::Stale),
+        "not fresh: pressing refused"
+    );
+}
+
+#[test]
+fn a_release_is_confirmed_and_fades_in_without_a_step() {
+    let mut b = Bench::with(gated());
+    // The first force after start is confirmed by four agreeing frames.
+    let jump = force_at(1.0);
+    let out = stream(&mut b, jump, 0.02, 14);
+    assert!((out.rendered_force_nn - jump).abs() < 1e-3, "{out:?}");
+    // The tip springs back to zero (released) with no stage motion: four frames
+    // confirm it, and the force goes over gate_fade_in_ms, not in one frame.
+    let mut previous = out.rendered_force_nn;
+    let mut largest_step: f64 = 0.0;
+    for _ in 0..20 {
+        b.publish(0.0, true, 0.0);
+        for _ in 0..17 {
+            let v = b.tick().rendered_force_nn;
+            largest_step = largest_step.max((v - previous).abs());
+            previous = v;
+        }
+    }
+    assert!(previous.abs() < 1e-6, "{previous}");
+    assert!(
+        largest_step <= jump / 150.0 + 1e-9,
+        "faded: step {largest_step}"
+    );
+    assert_eq!(b.c.gate_counters().confirmed, 2);
+}
+
+#[test]
+fn the_gate_follows_real_contact_driven_by_the_stage() {
+    let mut b = Bench::with(gated());
+    stream(&mut b, 0.0, 0.02, 14);
+    let held_before = b.c.gate_counters().held;
+    // Pressing at 10 um/s (the stylus 12 mm down: 10 mm beyond the deadband, limited);
+    // the default probe's k is 60 nN/um, a rigid sample gives 600 nN/s.
+    b.position_mm = Vector3::new(0.0, 0.0, -12.0);
+    let mut force_nn = 0.0;
+    for _ in 0..60 {
+        force_nn += 600.0 / 60.0;
+        let out = stream(&mut b, force_nn, 0.02, 1);
+        assert!(out.stage_velocity_um_s.z < 0.0, "{out:?}");
+    }
+    assert_eq!(b.c.gate_counters().held, held_before);
+    let rendered = b.run(20).rendered_force_nn;
+    assert!(
+        (rendered - force_nn).abs() < 1e-6,
+        "{rendered} vs {force_nn}"
+    );
+}
+
+#[test]
+fn a_reacquired_force_fades_in_and_a_vague_one_is_attenuated() {
+    let mut b = Bench::with(gated());
+    stream(&mut b, 300.0, 0.02, 14);
+    assert!((b.tick().rendered_force_nn - 300.0).abs() < 1e-6);
+    // Lost for three frames: the force fades; found again at the same force, it fades
+    // back in over 150 ms instead of one frame.
+    b.publish(f64::NAN, false, 0.0);
+    b.run(50);
+    let low = b.tick().rendered_force_nn;
+    assert!(low < 300.0 * 0.8, "{low}");
+    let out = stream(&mut b, 300.0, 0.02, 1);
+    assert!(out.rendered_force_nn < 300.0 - 1.0, "fading in: {out:?}");
+    let out = stream(&mut b, 300.0, 0.02, 10);
+    assert!((out.rendered_force_nn - 300.0).abs() < 1e-3, "{out:?}");
+    // sigma 0.2 deg, twice full_sigma_deg: rendered at a quarter, counted.
+    let out = stream(&mut b, 300.0, 0.2, 3);
+    assert!((out.rendered_force_nn - 75.0).abs() < 1e-3, "{out:?}");
+    assert_eq!(b.c.gate_counters().attenuated, 3);
+}
+
+#[test]
+fn slow_frames_refuse_force_feedback_without_stale_events() {
+    let mut b = Bench::with(gated());
+    stream(&mut b, 0.0, 0.02, 14);
+    // One frame every 600 ms: after the period is measured, no force, no pressing.
+    for _ in 0..6 {
+        b.publish(0.0, true, 0.0);
+        b.run(600);
+    }
+    let out = b.tick();
+    assert_eq!(out.press_block, Some(PressBlock::SlowFrames));
+    // Only the first two gaps, before two long intervals in a row measure the scan.
+    assert!(b.c.counters().stale_events <= 2, "{:?}", b.c.counters());
 }

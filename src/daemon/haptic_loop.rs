@@ -16,7 +16,9 @@ use nalgebra::Vector3;
 use super::rt;
 use super::stats::Histogram;
 use super::PublishedEstimate;
-use crate::control::{Controller, SafetyCounters, SafetyState, TeleopGains, TickInput};
+use crate::control::{
+    Controller, GateCounters, PressBlock, SafetyCounters, SafetyState, TeleopGains, TickInput,
+};
 use crate::hw::clock::monotonic_ns;
 use crate::hw::daq::RateOutput;
 use crate::hw::haptic::HapticDevice;
@@ -60,6 +62,9 @@ pub struct TickRecord {
     pub rendered_force_nn: f64,
     pub state: SafetyState,
     pub press_blocked: bool,
+    /// Estimates the plausibility gate held, and rendered attenuated, so far.
+    pub gate_held: u64,
+    pub gate_attenuated: u64,
 }
 
 /// What the loop shares with the supervisor: counters to read, a flag to stop it.
@@ -71,6 +76,16 @@ pub struct LoopShared {
     pub stale_events: AtomicU64,
     pub faults: AtomicU64,
     pub telemetry_dropped: AtomicU64,
+    /// The plausibility gate's counts (see [`GateCounters`]).
+    pub gate_held: AtomicU64,
+    pub gate_attenuated: AtomicU64,
+    pub gate_confirmed: AtomicU64,
+    /// The frame period and capture-to-arrival delay the loop measures, microseconds
+    /// (0: not measured yet).
+    pub frame_period_us: AtomicU64,
+    pub frame_delay_us: AtomicU64,
+    /// Frames come too slowly for force feedback (a slow scan).
+    pub slow_frames: AtomicBool,
     state: AtomicU8,
     /// Set on a fault transition (rare: it may allocate), taken by the supervisor to log.
     pub last_fault: Mutex<Option<String>>,
@@ -112,6 +127,7 @@ pub struct LoopReport {
     pub periods_us: Histogram,
     pub overruns: u64,
     pub counters: SafetyCounters,
+    pub gate: GateCounters,
     pub realtime: bool,
 }
 
@@ -251,6 +267,7 @@ impl HapticLoop {
             periods_us,
             overruns,
             counters: self.controller.counters(),
+            gate: self.controller.gate_counters(),
             realtime,
         }
     }
@@ -303,6 +320,26 @@ impl HapticLoop {
             .stale_events
             .store(counters.stale_events, Ordering::Relaxed);
         shared.faults.store(counters.faults, Ordering::Relaxed);
+        let gate = self.controller.gate_counters();
+        shared.gate_held.store(gate.held, Ordering::Relaxed);
+        shared
+            .gate_attenuated
+            .store(gate.attenuated, Ordering::Relaxed);
+        shared
+            .gate_confirmed
+            .store(gate.confirmed, Ordering::Relaxed);
+        let timing = self.controller.frame_timing();
+        let micros = |s: Option<f64>| s.map_or(0, |s| (s * 1e6) as u64);
+        shared
+            .frame_period_us
+            .store(micros(timing.period_s()), Ordering::Relaxed);
+        shared
+            .frame_delay_us
+            .store(micros(timing.delay_s()), Ordering::Relaxed);
+        shared.slow_frames.store(
+            out.press_block == Some(PressBlock::SlowFrames),
+            Ordering::Relaxed,
+        );
         if tick.is_multiple_of(u64::from(self.options.telemetry_every.max(1))) {
             let record = TickRecord {
                 t_s: now_s,
@@ -313,6 +350,8 @@ impl HapticLoop {
                 rendered_force_nn: out.rendered_force_nn,
                 state: out.state,
                 press_blocked: out.press_block.is_some(),
+                gate_held: gate.held,
+                gate_attenuated: gate.attenuated,
             };
             if self.telemetry.push(record).is_err() {
                 shared.telemetry_dropped.fetch_add(1, Ordering::Relaxed);
@@ -334,5 +373,73 @@ impl Default for TickState {
             daq_ok: true,
             forces_on: false,
         }
+    }
+}
+
+/// Logs what the loop's counters say about the plausibility gate and the frame rate, at
+/// most once per `every` (the loop itself never logs): held and attenuated estimates
+/// since the last line, and entering or leaving the slow-scan mode at once.
+#[derive(Debug)]
+pub struct GateLog {
+    every: std::time::Duration,
+    last_line: Option<std::time::Instant>,
+    logged: GateCounters,
+    slow: bool,
+}
+
+impl Default for GateLog {
+    fn default() -> Self {
+        GateLog {
+            every: std::time::Duration::from_secs(5),
+            last_line: None,
+            logged: GateCounters::default(),
+            slow: false,
+        }
+    }
+}
+
+impl GateLog {
+    /// Called by the supervisor every 100 ms or so.
+    pub fn poll(&mut self, shared: &LoopShared, now: std::time::Instant) {
+        let slow = shared.slow_frames.load(Ordering::Relaxed);
+        if slow != self.slow {
+            self.slow = slow;
+            let period_ms = shared.frame_period_us.load(Ordering::Relaxed) as f64 * 1e-3;
+            if slow {
+                tracing::warn!(
+                    "frames arrive every {period_ms:.0} ms, above safety.max_frame_period_ms: \
+                     a slow scan gives no force feedback; sensed force off, pressing refused, \
+                     positioning only (use a fast scan of 10 frames/s or more to feel forces)"
+                );
+            } else {
+                tracing::info!("frames every {period_ms:.0} ms again: force feedback back on");
+            }
+        }
+        if self
+            .last_line
+            .is_some_and(|t| now.duration_since(t) < self.every)
+        {
+            return;
+        }
+        let held = shared.gate_held.load(Ordering::Relaxed);
+        let attenuated = shared.gate_attenuated.load(Ordering::Relaxed);
+        let confirmed = shared.gate_confirmed.load(Ordering::Relaxed);
+        if held == self.logged.held && attenuated == self.logged.attenuated {
+            return;
+        }
+        tracing::warn!(
+            "plausibility gate: {} estimates held as implausible jumps, {} rendered \
+             attenuated for a large sigma, {} jumps confirmed (totals {held}, {attenuated}, \
+             {confirmed})",
+            held - self.logged.held,
+            attenuated - self.logged.attenuated,
+            confirmed - self.logged.confirmed,
+        );
+        self.logged = GateCounters {
+            held,
+            attenuated,
+            confirmed,
+        };
+        self.last_line = Some(now);
     }
 }

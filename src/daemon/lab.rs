@@ -51,6 +51,7 @@ pub fn from_estimate(e: &Estimate) -> FrameEstimate {
         force_nn: e.force_nn.filter(|_| detected),
         apex_px: e.apex_px.filter(|_| detected),
         confidence: e.confidence,
+        angle_sigma_deg: e.angle_sigma_deg.filter(|_| detected),
     }
 }
 

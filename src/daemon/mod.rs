@@ -40,6 +40,8 @@ pub struct FrameEstimate {
     pub force_nn: Option<f64>,
     pub apex_px: Option<[f64; 2]>,
     pub confidence: f64,
+    /// The standard error of `angle_deg`, degrees (None: unknown).
+    pub angle_sigma_deg: Option<f64>,
 }
 
 impl FrameEstimate {
@@ -50,6 +52,7 @@ impl FrameEstimate {
         force_nn: None,
         apex_px: None,
         confidence: 0.0,
+        angle_sigma_deg: None,
     };
 }
 
@@ -69,6 +72,8 @@ pub struct PublishedEstimate {
     pub force_nn: f64,
     pub apex_px: [f64; 2],
     pub confidence: f64,
+    /// The standard error of `angle_deg`, degrees; NaN when unknown.
+    pub angle_sigma_deg: f64,
 }
 
 impl Default for PublishedEstimate {
@@ -83,6 +88,7 @@ impl Default for PublishedEstimate {
             force_nn: f64::NAN,
             apex_px: [f64::NAN; 2],
             confidence: 0.0,
+            angle_sigma_deg: f64::NAN,
         }
     }
 }
@@ -101,6 +107,7 @@ impl PublishedEstimate {
             force_nn: force_nn.filter(|_| detected).unwrap_or(f64::NAN),
             apex_px: e.apex_px.filter(|_| detected).unwrap_or([f64::NAN; 2]),
             confidence: e.confidence,
+            angle_sigma_deg: e.angle_sigma_deg.filter(|_| detected).unwrap_or(f64::NAN),
         }
     }
 
@@ -111,6 +118,8 @@ impl PublishedEstimate {
             frame_time_s: self.frame_time_s,
             detected: self.detected,
             force_nn: self.force_nn,
+            angle_deg: self.angle_deg,
+            angle_sigma_deg: self.angle_sigma_deg,
         }
     }
 }

@@ -204,6 +204,10 @@ impl ForceStats {
 pub struct SafetyStats {
     pub stale_events: u64,
     pub faults: u64,
+    /// Estimates the plausibility gate held (implausible jumps, not rendered).
+    pub gate_held: u64,
+    /// Estimates rendered attenuated for a large sigma.
+    pub gate_attenuated: u64,
 }
 
 #[cfg(test)]
@@ -259,6 +263,8 @@ mod tests {
             safety: SafetyStats {
                 stale_events: 0,
                 faults: 0,
+                gate_held: 2,
+                gate_attenuated: 0,
             },
             memory: MemoryStats::default(),
         };
@@ -266,6 +272,8 @@ mod tests {
         assert_eq!(json["haptic_loop"]["period_us_p99"], 1010.5);
         assert!(json["force"]["true_peak_nN"].is_null());
         assert_eq!(json["frames"]["dropped"], 0);
+        assert_eq!(json["safety"]["gate_held"], 2);
+        assert_eq!(json["safety"]["gate_attenuated"], 0);
     }
 
     #[test]

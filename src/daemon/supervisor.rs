@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use tokio::sync::mpsc as async_mpsc;
 
-use super::haptic_loop::{HapticLoop, LoopOptions, LoopReport, LoopShared};
+use super::haptic_loop::{GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
 use super::snapshot::snapshot_channel;
@@ -308,6 +308,7 @@ async fn supervise(
     let mut interval = tokio::time::interval(Duration::from_millis(100));
     let deadline = options.duration.map(|d| started + d);
     let mut memory = MemoryWatch::default();
+    let mut gate_log = GateLog::default();
     let mut next_memory_sample = started;
     let exit = loop {
         tokio::select! {
@@ -327,6 +328,7 @@ async fn supervise(
         if options.stop_when_frames_end && pipeline_shared.source_ended.load(Ordering::Relaxed) {
             break ExitReason::FramesEnded;
         }
+        gate_log.poll(&loop_shared, Instant::now());
         health.check(
             &loop_shared,
             &pipeline_shared,
@@ -475,6 +477,14 @@ fn assemble_stats(
             faults: loop_report.map_or_else(
                 || loop_shared.faults.load(Ordering::Relaxed),
                 |r| r.counters.faults,
+            ),
+            gate_held: loop_report.map_or_else(
+                || loop_shared.gate_held.load(Ordering::Relaxed),
+                |r| r.gate.held,
+            ),
+            gate_attenuated: loop_report.map_or_else(
+                || loop_shared.gate_attenuated.load(Ordering::Relaxed),
+                |r| r.gate.attenuated,
             ),
         },
         memory: MemoryStats::default(),

@@ -95,7 +95,8 @@ pub fn spawn_recorder(
     writeln!(
         ticks,
         "t_s,period_us,pos_x_mm,pos_y_mm,pos_z_mm,force_x_n,force_y_n,force_z_n,\
-         vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked"
+         vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
+         gate_attenuated"
     )?;
     writeln!(
         estimates,
@@ -133,12 +134,14 @@ fn write_tick(out: &mut impl Write, r: &TickRecord) -> io::Result<()> {
     let [vx, vy, vz] = r.velocity_um_s;
     writeln!(
         out,
-        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{}",
+        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{},{},{}",
         r.t_s,
         r.period_us,
         r.rendered_force_nn,
         r.state.as_str(),
-        u8::from(r.press_blocked)
+        u8::from(r.press_blocked),
+        r.gate_held,
+        r.gate_attenuated
     )
 }
 
@@ -198,6 +201,7 @@ mod tests {
                     [f64::NAN; 2]
                 },
                 confidence: 0.9,
+                angle_sigma_deg: if detected { 0.02 } else { f64::NAN },
             },
             processing_ms: 0.8,
             true_force_nn: None,
