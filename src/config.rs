@@ -107,7 +107,7 @@ impl Range {
         match self.zero {
             Zero::Allowed if value == 0.0 => true,
             Zero::Refused if value == 0.0 => false,
-            _ => value.is_finite() && self.lo <= value && value <= self.hi,
+            _ => value.is_finite() && (self.lo..=self.hi).contains(&value),
         }
     }
 }

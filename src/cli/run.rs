@@ -188,8 +188,15 @@ impl StatsFile {
     }
 
     fn write(mut self, json: &str) -> anyhow::Result<()> {
-        self.file
-            .set_len(0)
+        // A regular file loses what an earlier run left; a pipe or terminal
+        // (`/dev/stdout`) cannot be truncated and need not be.
+        let regular = self.file.metadata().is_ok_and(|m| m.is_file());
+        let truncate = if regular {
+            self.file.set_len(0)
+        } else {
+            Ok(())
+        };
+        truncate
             .and_then(|()| self.file.write_all(json.as_bytes()))
             .with_context(|| format!("writing {}", self.path.display()))?;
         self.written = true;
@@ -263,5 +270,43 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
             "memory: {warm:.1} MiB resident after warm-up, {end:.1} MiB at the end ({:+.2} MiB)",
             end - warm
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_file_replaces_old_content_and_leaves_nothing_when_unwritten() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stats.json");
+        std::fs::write(&path, "x".repeat(10_000)).unwrap();
+        StatsFile::open(&path).unwrap().write("{}").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "{}");
+        // Kept when it was there before, removed when only this run created it.
+        drop(StatsFile::open(&path).unwrap());
+        assert!(path.exists());
+        let fresh = dir.path().join("fresh.json");
+        drop(StatsFile::open(&fresh).unwrap());
+        assert!(!fresh.exists());
+    }
+
+    #[test]
+    fn duration_range() {
+        assert_eq!(parse_duration_s("2.5"), Ok(2.5));
+        assert_eq!(parse_duration_s("1e6"), Ok(1e6));
+        for bad in ["1e19", "0", "-3", "nan", "inf"] {
+            let msg = parse_duration_s(bad).unwrap_err();
+            assert!(
+                msg.ends_with(
+                    "accepted 0.001 to 1000000 s (without it the run lasts until stopped)"
+                ),
+                "{msg}"
+            );
+        }
+        assert!(parse_duration_s("soon")
+            .unwrap_err()
+            .contains("not a number"));
     }
 }
