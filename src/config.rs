@@ -10,7 +10,8 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::de::Error as _;
+use serde::{Deserialize, Deserializer};
 
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
 use crate::daemon::config::{DaemonConfig, RawDaemon};
@@ -32,6 +33,13 @@ pub enum ConfigError {
     },
     #[error("{file}: {message}")]
     Parse { file: PathBuf, message: String },
+    #[error("{file}: {key} = {value} is out of range: accepted {accepted}")]
+    OutOfRange {
+        file: PathBuf,
+        key: String,
+        value: String,
+        accepted: Range,
+    },
     #[error("{file}: {key} {reason}, got {value}")]
     Invalid {
         file: PathBuf,
@@ -41,6 +49,121 @@ pub enum ConfigError {
     },
     #[error("{file}: {message}")]
     Inconsistent { file: PathBuf, message: String },
+}
+
+/// The accepted values of a number a lab types, with its unit: the one rule every
+/// numeric key is checked against ([`Checker::number`]), so every refusal reads the same
+/// (`probe.toml: cantilever.length_um = 1e308 is out of range: accepted 10 to 1000 um`)
+/// and `config/` documents each key's range in the same words.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Range {
+    pub lo: f64,
+    pub hi: f64,
+    /// Printed after the bounds; empty for a plain count.
+    pub unit: &'static str,
+    pub zero: Zero,
+}
+
+/// How a range treats 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Zero {
+    /// Like any other value: accepted when inside the bounds.
+    AsRange,
+    /// Also accepted below the bounds (0 switches the feature off).
+    Allowed,
+    /// Refused although inside the bounds (a signed factor that must not vanish).
+    Refused,
+}
+
+impl Range {
+    /// `lo` to `hi`, both included.
+    pub const fn new(lo: f64, hi: f64, unit: &'static str) -> Range {
+        Range {
+            lo,
+            hi,
+            unit,
+            zero: Zero::AsRange,
+        }
+    }
+
+    /// The same range, and 0 as well.
+    pub const fn or_zero(self) -> Range {
+        Range {
+            zero: Zero::Allowed,
+            ..self
+        }
+    }
+
+    /// The same range without 0.
+    pub const fn except_zero(self) -> Range {
+        Range {
+            zero: Zero::Refused,
+            ..self
+        }
+    }
+
+    /// Whether `value` is accepted (never a NaN or an infinity).
+    pub fn contains(&self, value: f64) -> bool {
+        match self.zero {
+            Zero::Allowed if value == 0.0 => true,
+            Zero::Refused if value == 0.0 => false,
+            _ => value.is_finite() && (self.lo..=self.hi).contains(&value),
+        }
+    }
+}
+
+impl fmt::Display for Range {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.zero == Zero::Allowed {
+            f.write_str("0 or ")?;
+        }
+        write!(f, "{} to {}", Number(self.lo), Number(self.hi))?;
+        if !self.unit.is_empty() {
+            write!(f, " {}", self.unit)?;
+        }
+        if self.zero == Zero::Refused {
+            f.write_str(", not 0")?;
+        }
+        Ok(())
+    }
+}
+
+/// A number as a person reads it in a message: plain between 1e-4 and 1e7, else with an
+/// exponent (`1e300`, not 301 digits), and `nan`/`inf` spelt as in TOML.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Number(pub f64);
+
+impl fmt::Display for Number {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let v = self.0;
+        if v.is_nan() {
+            f.write_str("nan")
+        } else if v.is_infinite() {
+            f.write_str(if v > 0.0 { "inf" } else { "-inf" })
+        } else if v == 0.0 || (1e-4..1e7).contains(&v.abs()) {
+            write!(f, "{v}")
+        } else {
+            write!(f, "{v:e}")
+        }
+    }
+}
+
+/// A TOML list of exactly `N` items. serde's own `[T; N]` lets the TOML reader drop
+/// extra items silently (`[2.0, 2.0, 2.0, 9.0]` read as three axes), so every
+/// fixed-size list in a configuration is read through this.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct List<T, const N: usize>(pub [T; N]);
+
+impl<'de, T: Deserialize<'de>, const N: usize> Deserialize<'de> for List<T, N> {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let items = Vec::<T>::deserialize(deserializer)?;
+        let len = items.len();
+        let expected = format!("a list of {N} items");
+        items
+            .try_into()
+            .map(List)
+            .map_err(|_| D::Error::invalid_length(len, &expected.as_str()))
+    }
 }
 
 /// A validated configuration.
@@ -134,6 +257,23 @@ impl fmt::Display for PixelOrigin {
 /// outline by a fraction of the blur, never by pixels.
 pub const MAX_EDGE_BIAS_PX: f64 = 2.0;
 
+// The accepted ranges of `[cantilever]` and `[tracker]`, documented with the same words
+// in config/probe.example.toml. The cantilever's span what AFM cantilevers are made as:
+// from short high-frequency levers (10 um) to the longest soft ones (under 1 mm), from
+// the softest contact-mode levers (0.001 N/m) to diamond-like indentation ones (1000
+// N/m), of polymers (about 2 GPa) to diamond (about 1000 GPa).
+const LENGTH_UM: Range = Range::new(10.0, 1000.0, "um");
+const SPRING_CONSTANT_N_PER_M: Range = Range::new(0.001, 1000.0, "N/m");
+const YOUNGS_MODULUS_GPA: Range = Range::new(1.0, 1000.0, "GPa");
+const WIDTH_UM: Range = Range::new(1.0, 200.0, "um");
+const THICKNESS_UM: Range = Range::new(0.1, 20.0, "um");
+/// Wider than 45 degrees the search windows of neighbouring edges overlap; narrower than
+/// 1 degree no deflection fits in the window.
+const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
+const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
+/// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
+const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");
+
 /// Validated `[tracker]` section.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerConfig {
@@ -224,9 +364,11 @@ struct RawTracker {
 #[serde(deny_unknown_fields)]
 struct RawCalibration {
     reference_image: String,
-    red: Vec<[f64; 2]>,
-    blue: Vec<[f64; 2]>,
-    green: Vec<[f64; 2]>,
+    /// Each click `[x, y]`; read as a list so that a third coordinate is refused
+    /// rather than silently dropped.
+    red: Vec<Vec<f64>>,
+    blue: Vec<Vec<f64>>,
+    green: Vec<Vec<f64>>,
 }
 
 impl Config {
@@ -308,32 +450,56 @@ impl Checker<'_> {
         }
     }
 
-    /// A finite, strictly positive number.
-    pub(crate) fn positive(&self, key: &str, value: f64) -> Result<f64, ConfigError> {
-        if value.is_finite() && value > 0.0 {
+    /// A number in `range`; out of it (or not finite), an error naming the key, the
+    /// value and the accepted range.
+    pub(crate) fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
+        if range.contains(value) {
             Ok(value)
         } else {
-            Err(self.invalid(key, value, "must be a finite number > 0"))
+            Err(self.out_of_range(key, Number(value), range))
         }
     }
 
-    /// Three finite components, each > 0 (or >= 0 when `zero_ok`).
+    /// An optional number: checked against `range` when given, else `default`.
+    pub(crate) fn number_or(
+        &self,
+        key: &str,
+        value: Option<f64>,
+        default: f64,
+        range: Range,
+    ) -> Result<f64, ConfigError> {
+        value.map_or(Ok(default), |v| self.number(key, v, range))
+    }
+
+    /// A whole number in `range`.
+    pub(crate) fn whole(&self, key: &str, value: i64, range: Range) -> Result<i64, ConfigError> {
+        // Exact: every bound in use is far below 2^53.
+        if range.contains(value as f64) {
+            Ok(value)
+        } else {
+            Err(self.out_of_range(key, value, range))
+        }
+    }
+
+    /// One number per axis, each in `range`; an error names the axis (`key[1]`).
     pub(crate) fn vector3(
         &self,
         key: &str,
         v: [f64; 3],
-        zero_ok: bool,
+        range: Range,
     ) -> Result<nalgebra::Vector3<f64>, ConfigError> {
-        let ok = |x: f64| x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0));
-        if v.iter().all(|&x| ok(x)) {
-            Ok(nalgebra::Vector3::from(v))
-        } else {
-            let reason = if zero_ok {
-                "must hold three finite numbers >= 0"
-            } else {
-                "must hold three finite numbers > 0"
-            };
-            Err(self.invalid(key, format_args!("{v:?}"), reason))
+        for (axis, &value) in v.iter().enumerate() {
+            self.number(&format!("{key}[{axis}]"), value, range)?;
+        }
+        Ok(nalgebra::Vector3::from(v))
+    }
+
+    fn out_of_range(&self, key: &str, value: impl fmt::Display, range: Range) -> ConfigError {
+        ConfigError::OutOfRange {
+            file: self.file.to_path_buf(),
+            key: key.to_string(),
+            value: value.to_string(),
+            accepted: range,
         }
     }
 
@@ -379,7 +545,7 @@ impl Checker<'_> {
 
     fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
         let length_um = match raw.length_um {
-            Some(v) => self.positive("cantilever.length_um", v)?,
+            Some(v) => self.number("cantilever.length_um", v, LENGTH_UM)?,
             None => return Err(self.inconsistent("missing cantilever.length_um".into())),
         };
         let section = [raw.youngs_modulus_gpa, raw.width_um, raw.thickness_um];
@@ -400,19 +566,23 @@ impl Checker<'_> {
                 ))
             }
             (Some(k), false) => {
-                let k = self.positive("cantilever.spring_constant_n_per_m", k)?;
+                let k = self.number(
+                    "cantilever.spring_constant_n_per_m",
+                    k,
+                    SPRING_CONSTANT_N_PER_M,
+                )?;
                 Cantilever::rigidity_from_spring_constant(k, length_um)
             }
             (None, true) => {
-                let names = [
-                    "cantilever.youngs_modulus_gpa",
-                    "cantilever.width_um",
-                    "cantilever.thickness_um",
+                let keys = [
+                    ("cantilever.youngs_modulus_gpa", YOUNGS_MODULUS_GPA),
+                    ("cantilever.width_um", WIDTH_UM),
+                    ("cantilever.thickness_um", THICKNESS_UM),
                 ];
                 let mut values = [0.0; 3];
-                for ((slot, value), name) in values.iter_mut().zip(section).zip(names) {
+                for ((slot, value), (name, range)) in values.iter_mut().zip(section).zip(keys) {
                     *slot = match value {
-                        Some(v) => self.positive(name, v)?,
+                        Some(v) => self.number(name, v, range)?,
                         None => {
                             return Err(self.inconsistent(format!(
                                 "missing {name} (the cross-section needs youngs_modulus_gpa, \
@@ -449,13 +619,12 @@ impl Checker<'_> {
                 ))
             }
         };
-        let window_deg = match raw.window_deg {
-            None => DEFAULT_WINDOW_DEG,
-            Some(w) if w.is_finite() && w > 0.0 && w <= 45.0 => w,
-            Some(w) => {
-                return Err(self.invalid("tracker.window_deg", w, "must be in (0, 45] degrees"))
-            }
-        };
+        let window_deg = self.number_or(
+            "tracker.window_deg",
+            raw.window_deg,
+            DEFAULT_WINDOW_DEG,
+            WINDOW_DEG,
+        )?;
         let pixel_origin = match raw.pixel_origin {
             None => PixelOrigin::Centre,
             Some(text) => PixelOrigin::parse(&text).ok_or_else(|| {
@@ -467,17 +636,8 @@ impl Checker<'_> {
                 )
             })?,
         };
-        let edge_bias_px = match raw.edge_bias_px {
-            None => 0.0,
-            Some(b) if b.is_finite() && b.abs() <= MAX_EDGE_BIAS_PX => b,
-            Some(b) => {
-                return Err(self.invalid(
-                    "tracker.edge_bias_px",
-                    b,
-                    &format!("must be within +-{MAX_EDGE_BIAS_PX} px"),
-                ))
-            }
-        };
+        let edge_bias_px =
+            self.number_or("tracker.edge_bias_px", raw.edge_bias_px, 0.0, EDGE_BIAS_PX)?;
         let calibration = raw
             .calibration
             .map(|c| self.calibration(c, pixel_origin))
@@ -503,45 +663,56 @@ impl Checker<'_> {
                 "must name an image file",
             ));
         }
-        for (name, points) in [
-            ("red", &raw.red),
-            ("blue", &raw.blue),
-            ("green", &raw.green),
-        ] {
-            let key = format!("tracker.calibration.{name}");
-            if points.len() < 2 {
-                return Err(self.invalid(
-                    &key,
-                    format_args!("{} point(s)", points.len()),
-                    "needs at least two clicked pixels",
-                ));
-            }
-            if let Some(p) = points
-                .iter()
-                .find(|p| !(p[0].is_finite() && p[1].is_finite()))
-            {
-                return Err(self.invalid(&key, format_args!("{p:?}"), "must hold finite pixels"));
-            }
-            let spread = points
-                .iter()
-                .map(|p| (p[0] - points[0][0]).hypot(p[1] - points[0][1]))
-                .fold(0.0, f64::max);
-            if spread < 2.0 {
-                return Err(self.invalid(
-                    &key,
-                    format_args!("{points:?}"),
-                    "needs points at least 2 px apart to define a direction",
-                ));
-            }
-        }
+        let red = self.clicks("red", raw.red)?;
+        let blue = self.clicks("blue", raw.blue)?;
+        let green = self.clicks("green", raw.green)?;
         let base = self.file.parent().unwrap_or(Path::new(""));
         Ok(CalibrationConfig {
             reference_image: base.join(raw.reference_image),
-            red: raw.red,
-            blue: raw.blue,
-            green: raw.green,
+            red,
+            blue,
+            green,
         }
         .counted_from(origin))
+    }
+
+    /// The clicks on one edge: two or more pixels `[x, y]`, at least 2 px apart.
+    fn clicks(&self, name: &str, raw: Vec<Vec<f64>>) -> Result<Vec<[f64; 2]>, ConfigError> {
+        let key = format!("tracker.calibration.{name}");
+        if raw.len() < 2 {
+            return Err(self.invalid(
+                &key,
+                format_args!("{} point(s)", raw.len()),
+                "needs at least two clicked pixels",
+            ));
+        }
+        let mut points = Vec::with_capacity(raw.len());
+        for (i, p) in raw.iter().enumerate() {
+            let key = format!("{key}[{i}]");
+            let &[x, y] = p.as_slice() else {
+                return Err(self.invalid(
+                    &key,
+                    format_args!("{p:?}"),
+                    "must be one pixel [x, y] (two numbers)",
+                ));
+            };
+            points.push([
+                self.number(&format!("{key}[0]"), x, CLICK_PX)?,
+                self.number(&format!("{key}[1]"), y, CLICK_PX)?,
+            ]);
+        }
+        let spread = points
+            .iter()
+            .map(|p| (p[0] - points[0][0]).hypot(p[1] - points[0][1]))
+            .fold(0.0, f64::max);
+        if spread < 2.0 {
+            return Err(self.invalid(
+                &key,
+                format_args!("{points:?}"),
+                "needs points at least 2 px apart to define a direction",
+            ));
+        }
+        Ok(points)
     }
 }
 
@@ -640,7 +811,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         );
         let msg = with("edge_bias_px = 3.5");
         assert!(
-            msg.contains("tracker.edge_bias_px") && msg.contains("got 3.5") && msg.contains("+-2"),
+            msg.ends_with("tracker.edge_bias_px = 3.5 is out of range: accepted -2 to 2 px"),
             "{msg}"
         );
         assert!(with("edge_bias_px = nan").contains("tracker.edge_bias_px"));
@@ -652,7 +823,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         let msg = error_of("[cantilever]\nlength_um = -3\nspring_constant_n_per_m = 1\n");
         assert_eq!(
             msg,
-            "probe.toml: cantilever.length_um must be a finite number > 0, got -3"
+            "probe.toml: cantilever.length_um = -3 is out of range: accepted 10 to 1000 um"
         );
     }
 
@@ -660,7 +831,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     fn non_finite_values_are_rejected() {
         let msg = error_of("[cantilever]\nlength_um = 400\nspring_constant_n_per_m = nan\n");
         assert!(msg.contains("cantilever.spring_constant_n_per_m"), "{msg}");
-        assert!(msg.contains("NaN"), "{msg}");
+        assert!(msg.contains("= nan is out of range"), "{msg}");
         let msg = error_of("[cantilever]\nlength_um = inf\nspring_constant_n_per_m = 1\n");
         assert!(
             msg.contains("cantilever.length_um") && msg.contains("inf"),
@@ -669,10 +840,85 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         let msg = error_of(
             "[cantilever]\nlength_um = 400\nyoungs_modulus_gpa = 169\nwidth_um = 0\nthickness_um = 2\n",
         );
-        assert!(
-            msg.contains("cantilever.width_um") && msg.contains("got 0"),
-            "{msg}"
+        assert!(msg.contains("cantilever.width_um = 0 is out"), "{msg}");
+    }
+
+    #[test]
+    fn absurd_cantilevers_name_the_accepted_range() {
+        let msg = error_of("[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1e300\n");
+        assert_eq!(
+            msg,
+            "probe.toml: cantilever.spring_constant_n_per_m = 1e300 is out of range: \
+             accepted 0.001 to 1000 N/m"
         );
+        let msg = error_of("[cantilever]\nlength_um = 1e308\nspring_constant_n_per_m = 1\n");
+        assert_eq!(
+            msg,
+            "probe.toml: cantilever.length_um = 1e308 is out of range: accepted 10 to 1000 um"
+        );
+        let msg = error_of(
+            "[cantilever]\nlength_um = 400\nyoungs_modulus_gpa = 169\nwidth_um = 50\n\
+             thickness_um = -inf\n",
+        );
+        assert_eq!(
+            msg,
+            "probe.toml: cantilever.thickness_um = -inf is out of range: \
+             accepted 0.1 to 20 um"
+        );
+        // The bounds themselves are accepted.
+        for (length, k) in [(10.0, 0.001), (1000.0, 1000.0)] {
+            let text =
+                format!("[cantilever]\nlength_um = {length:?}\nspring_constant_n_per_m = {k:?}\n");
+            assert!(parse(&text).is_ok(), "{text}");
+        }
+    }
+
+    #[test]
+    fn clicks_are_two_coordinates_inside_a_frame() {
+        let three = SAMPLE.replace("[156.8, 33.4]", "[1.0, 2.0, 3.0]");
+        assert_eq!(
+            error_of(&three),
+            "probe.toml: tracker.calibration.red[0] must be one pixel [x, y] (two numbers), \
+             got [1.0, 2.0, 3.0]"
+        );
+        let one = SAMPLE.replace("[245.4, 153.4]", "[245.4]");
+        assert!(
+            error_of(&one).starts_with("probe.toml: tracker.calibration.blue[1] must be one pixel"),
+            "{one}"
+        );
+        let far = SAMPLE.replace("[314.8, 142.9]", "[314.8, 1e9]");
+        assert_eq!(
+            error_of(&far),
+            "probe.toml: tracker.calibration.green[2][1] = 1e9 is out of range: \
+             accepted -0.5 to 16384 px"
+        );
+    }
+
+    #[test]
+    fn numbers_print_as_a_person_reads_them() {
+        let shown = [
+            1e300,
+            1e-8,
+            0.06,
+            434.675,
+            -3.0,
+            0.0,
+            5e6,
+            f64::NAN,
+            f64::NEG_INFINITY,
+        ]
+        .map(|v| Number(v).to_string());
+        assert_eq!(
+            shown,
+            ["1e300", "1e-8", "0.06", "434.675", "-3", "0", "5000000", "nan", "-inf"]
+        );
+        assert_eq!(
+            Range::new(0.5, 3600.0, "s").or_zero().to_string(),
+            "0 or 0.5 to 3600 s"
+        );
+        assert!(Range::new(0.5, 3600.0, "s").or_zero().contains(0.0));
+        assert!(!Range::new(-1.0, 1.0, "V").except_zero().contains(0.0));
+        assert!(!Range::new(0.0, 1.0, "").contains(f64::NAN));
     }
 
     #[test]
@@ -717,10 +963,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         let msg = error_of(&format!("{base}threshold = \"mean\"\n"));
         assert!(msg.contains("\"mean\""), "{msg}");
         let msg = error_of(&format!("{base}window_deg = 0\n"));
-        assert!(
-            msg.contains("tracker.window_deg") && msg.contains("got 0"),
-            "{msg}"
-        );
+        assert!(msg.contains("tracker.window_deg = 0 is out"), "{msg}");
         let msg = error_of(&format!(
             "{base}[tracker.calibration]\nreference_image = \"r.png\"\nred = [[1.0, 2.0]]\n\
              blue = [[0.0, 0.0], [9.0, 9.0]]\ngreen = [[0.0, 0.0], [9.0, 9.0]]\n"

@@ -255,3 +255,95 @@ fn speaks_systemds_notify_protocol() {
     );
     assert_eq!(messages.last().map(String::as_str), Some("STOPPING=1"));
 }
+
+/// Runs `nanoforce run` with `args`, killing it if it outlives `limit`: its status (None
+/// when killed), stderr and how long it took.
+fn run_bounded(
+    args: &[&std::ffi::OsStr],
+    limit: Duration,
+) -> (Option<std::process::ExitStatus>, String, Duration) {
+    let start = Instant::now();
+    let mut child = run_cmd()
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break Some(status);
+        }
+        if start.elapsed() > limit {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let elapsed = start.elapsed();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    (status, err, elapsed)
+}
+
+#[test]
+fn duration_out_of_range_is_a_usage_error_before_anything_opens() {
+    for value in ["1e19", "1e20", "-1", "nan", "inf", "0"] {
+        let dir = tempfile::tempdir().unwrap();
+        let args = [
+            "--duration-s".as_ref(),
+            value.as_ref(),
+            "--state-dir".as_ref(),
+            dir.path().as_os_str(),
+        ];
+        let (status, err, _) = run_bounded(&args, Duration::from_secs(10));
+        assert_eq!(status.and_then(|s| s.code()), Some(2), "{value}: {err}");
+        assert!(
+            err.contains("--duration-s")
+                && err.contains("is out of range: accepted 0.001 to 1000000 s"),
+            "{value}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{value}: {err}");
+        assert!(sessions(dir.path()).is_empty(), "{value}: nothing started");
+    }
+}
+
+#[test]
+fn unwritable_stats_json_is_refused_before_the_devices_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "").unwrap();
+    for target in [
+        dir.path().join("missing").join("stats.json"),
+        file.join("stats.json"),
+        dir.path().to_path_buf(),
+    ] {
+        let state = tempfile::tempdir().unwrap();
+        let args = [
+            "--duration-s".as_ref(),
+            "3".as_ref(),
+            "--stats-json".as_ref(),
+            target.as_os_str(),
+            "--state-dir".as_ref(),
+            state.path().as_os_str(),
+        ];
+        let (status, err, elapsed) = run_bounded(&args, Duration::from_secs(10));
+        assert_eq!(status.and_then(|s| s.code()), Some(1), "{err}");
+        assert!(
+            err.contains(&format!(
+                "--stats-json {}: cannot write there",
+                target.display()
+            )),
+            "{err}"
+        );
+        // Before the run (3 s) and before any device or session folder.
+        assert!(elapsed < Duration::from_secs(2), "{elapsed:?}");
+        assert!(!err.contains("running"), "nothing started: {err}");
+        assert!(sessions(state.path()).is_empty(), "no session was created");
+    }
+}

@@ -1,5 +1,7 @@
 //! `nanoforce run`: the real-time teleoperation daemon. Without `--config` it runs the
 //! built-in simulated lab (config/sim.toml, compiled in), so it works anywhere.
+use std::fs::{File, OpenOptions};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
@@ -7,13 +9,18 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Args;
 
-use crate::config::Config;
+use crate::config::{Config, Number};
 use crate::daemon::notify::Notifier;
 use crate::daemon::{lab, telemetry, Daemon, ExitReason, RunOptions};
 use crate::hw::Clock;
 
 /// The built-in simulated lab.
 pub const SIM_CONFIG: &str = include_str!("../../config/sim.toml");
+
+/// `--duration-s` accepted, seconds: from one millisecond to about 11.6 days (a longer
+/// run is started without it and stopped by a signal). Far larger values overflow the
+/// clock's deadline.
+const DURATION_S: (f64, f64) = (0.001, 1e6);
 
 /// Run the real-time teleoperation daemon (default: the built-in simulated lab).
 #[derive(Debug, Args)]
@@ -37,7 +44,12 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        value_parser = parse_duration_s,
+        allow_negative_numbers = true
+    )]
     pub duration_s: Option<f64>,
     /// Write the run's statistics (loop timing, frames, force error, safety) as JSON.
     #[arg(long, value_name = "PATH")]
@@ -57,11 +69,17 @@ pub struct RunArgs {
 pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     // The configuration is validated completely before any device is opened.
     let (config, text) = load(args.config.as_deref())?;
-    let duration = match args.duration_s {
-        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
-        Some(s) => anyhow::bail!("--duration-s must be a positive number of seconds, got {s}"),
-        None => None,
-    };
+    let duration = args
+        .duration_s
+        .map(|s| check_duration_s(s).map(Duration::from_secs_f64))
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--duration-s {e}"))?;
+    // Opened now, so that an unwritable path is refused before anything moves.
+    let stats_json = args
+        .stats_json
+        .as_deref()
+        .map(StatsFile::open)
+        .transpose()?;
     let clock = Clock::start();
     let devices = lab::open(&config, clock).context("opening the lab's devices")?;
     let session_dir = if args.no_record {
@@ -107,8 +125,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         std::fs::write(dir.join("stats.json"), &json)
             .with_context(|| format!("writing {}", dir.join("stats.json").display()))?;
     }
-    if let Some(path) = &args.stats_json {
-        std::fs::write(path, &json).with_context(|| format!("writing {}", path.display()))?;
+    if let Some(file) = stats_json {
+        file.write(&json)?;
     }
     summarise(&outcome.stats);
     Ok(match outcome.exit {
@@ -118,6 +136,80 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         }
         _ => ExitCode::SUCCESS,
     })
+}
+
+/// `--duration-s`'s value parser: a clear usage error for a value out of range.
+fn parse_duration_s(text: &str) -> Result<f64, String> {
+    let seconds: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number of seconds"))?;
+    check_duration_s(seconds)
+}
+
+fn check_duration_s(seconds: f64) -> Result<f64, String> {
+    let (lo, hi) = DURATION_S;
+    if seconds.is_finite() && (lo..=hi).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "{} is out of range: accepted {} to {} s (without it the run lasts until stopped)",
+            Number(seconds),
+            Number(lo),
+            Number(hi)
+        ))
+    }
+}
+
+/// The `--stats-json` file, opened before the run; a file it created is removed again
+/// if the run ends before writing it.
+struct StatsFile {
+    path: PathBuf,
+    file: File,
+    created: bool,
+    written: bool,
+}
+
+impl StatsFile {
+    fn open(path: &Path) -> anyhow::Result<StatsFile> {
+        let created = std::fs::symlink_metadata(path).is_err();
+        let file = OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .with_context(|| format!("--stats-json {}: cannot write there", path.display()))?;
+        Ok(StatsFile {
+            path: path.to_path_buf(),
+            file,
+            created,
+            written: false,
+        })
+    }
+
+    fn write(mut self, json: &str) -> anyhow::Result<()> {
+        // A regular file loses what an earlier run left; a pipe or terminal
+        // (`/dev/stdout`) cannot be truncated and need not be.
+        let regular = self.file.metadata().is_ok_and(|m| m.is_file());
+        let truncate = if regular {
+            self.file.set_len(0)
+        } else {
+            Ok(())
+        };
+        truncate
+            .and_then(|()| self.file.write_all(json.as_bytes()))
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        self.written = true;
+        Ok(())
+    }
+}
+
+impl Drop for StatsFile {
+    fn drop(&mut self) {
+        if self.created && !self.written {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
 }
 
 /// The configuration and its text (recorded with the session).
@@ -179,5 +271,43 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
             "memory: {warm:.1} MiB resident after warm-up, {end:.1} MiB at the end ({:+.2} MiB)",
             end - warm
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_file_replaces_old_content_and_leaves_nothing_when_unwritten() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stats.json");
+        std::fs::write(&path, "x".repeat(10_000)).unwrap();
+        StatsFile::open(&path).unwrap().write("{}").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "{}");
+        // Kept when it was there before, removed when only this run created it.
+        drop(StatsFile::open(&path).unwrap());
+        assert!(path.exists());
+        let fresh = dir.path().join("fresh.json");
+        drop(StatsFile::open(&fresh).unwrap());
+        assert!(!fresh.exists());
+    }
+
+    #[test]
+    fn duration_range() {
+        assert_eq!(parse_duration_s("2.5"), Ok(2.5));
+        assert_eq!(parse_duration_s("1e6"), Ok(1e6));
+        for bad in ["1e19", "0", "-3", "nan", "inf"] {
+            let msg = parse_duration_s(bad).unwrap_err();
+            assert!(
+                msg.ends_with(
+                    "accepted 0.001 to 1000000 s (without it the run lasts until stopped)"
+                ),
+                "{msg}"
+            );
+        }
+        assert!(parse_duration_s("soon")
+            .unwrap_err()
+            .contains("not a number"));
     }
 }

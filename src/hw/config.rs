@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use super::daq::config::{ComediConfig, RawDaq};
 use super::frames::config::{PipeConfig, RawFrames, V4l2Config};
 use super::haptic::config::{HidConfig, OpenHapticsConfig, RawHaptic};
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, Range};
 
 /// One device section, as written in the file.
 pub(crate) type RawDevice = toml::Table;
@@ -137,19 +137,17 @@ pub(crate) fn required<T>(
         .ok_or_else(|| check.inconsistent(format!("missing {key} (needed by backend {backend:?})")))
 }
 
-/// A whole number in `lo..=hi`.
+/// A whole number in `lo..=hi` (`unit` as the message prints it, empty for a count).
 pub(crate) fn in_range(
     check: &Checker,
     key: &str,
     value: i64,
-    lo: i64,
-    hi: i64,
+    (lo, hi): (i64, i64),
+    unit: &'static str,
 ) -> Result<u32, ConfigError> {
-    if (lo..=hi).contains(&value) {
-        Ok(value as u32)
-    } else {
-        Err(check.invalid(key, value, &format!("must be in {lo}..={hi}")))
-    }
+    // In range, so it fits (every `hi` in use is below 2^32).
+    let range = Range::new(lo as f64, hi as f64, unit);
+    check.whole(key, value, range).map(|v| v as u32)
 }
 
 #[cfg(test)]

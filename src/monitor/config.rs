@@ -5,7 +5,15 @@ use std::net::SocketAddr;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, Range};
+
+// The accepted ranges, documented with the same words in config/sim.toml.
+/// Each page holds a connection and a JPEG stream: a handful of people watch a lab.
+const MAX_CLIENTS: Range = Range::new(1.0, 32.0, "");
+/// The tracker copies a frame out for every page frame: at most 10 a second.
+const FRAME_HZ: Range = Range::new(0.1, 10.0, "Hz");
+/// 0: none; the 240 kept thumbnails cover 2 minutes to 10 days.
+const THUMBNAIL_EVERY_S: Range = Range::new(0.5, 3600.0, "s").or_zero();
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -74,25 +82,16 @@ impl MonitorConfig {
         };
         let max_clients = match raw.max_clients {
             None => d.max_clients,
-            Some(n @ 1..=32) => n as usize,
-            Some(n) => return Err(check.invalid("monitor.max_clients", n, "must be in [1, 32]")),
+            // In range, so it fits.
+            Some(n) => check.whole("monitor.max_clients", n, MAX_CLIENTS)? as usize,
         };
-        let frame_hz = match raw.frame_hz {
-            None => d.frame_hz,
-            Some(f) if f.is_finite() && f > 0.0 && f <= 10.0 => f,
-            Some(f) => return Err(check.invalid("monitor.frame_hz", f, "must be in (0, 10] Hz")),
-        };
-        let thumbnail_every_s = match raw.thumbnail_every_s {
-            None => d.thumbnail_every_s,
-            Some(s) if s == 0.0 || (s.is_finite() && (0.5..=3600.0).contains(&s)) => s,
-            Some(s) => {
-                return Err(check.invalid(
-                    "monitor.thumbnail_every_s",
-                    s,
-                    "must be 0 (none) or in [0.5, 3600] s",
-                ))
-            }
-        };
+        let frame_hz = check.number_or("monitor.frame_hz", raw.frame_hz, d.frame_hz, FRAME_HZ)?;
+        let thumbnail_every_s = check.number_or(
+            "monitor.thumbnail_every_s",
+            raw.thumbnail_every_s,
+            d.thumbnail_every_s,
+            THUMBNAIL_EVERY_S,
+        )?;
         Ok(MonitorConfig {
             listen,
             max_clients,
@@ -150,7 +149,7 @@ mod tests {
         let err = parse("max_clients = 0\n").unwrap_err();
         assert_eq!(
             err,
-            "lab.toml: monitor.max_clients must be in [1, 32], got 0"
+            "lab.toml: monitor.max_clients = 0 is out of range: accepted 1 to 32"
         );
         let err = parse("frame_hz = 30\n").unwrap_err();
         assert!(

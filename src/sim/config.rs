@@ -6,7 +6,39 @@ use serde::Deserialize;
 use super::contact::SampleParams;
 use super::operator::OperatorParams;
 use super::stage::StageParams;
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, List, Range};
+
+// The accepted ranges, documented with the same words in config/sim.toml: a simulated
+// lab that stays a lab (an S100-like stage, an SEM, a person's hand).
+/// Slower than 1 um/s nothing happens in a run; faster than 5 mm/s no nanomanipulator.
+const STAGE_SPEED_UM_PER_S: Range = Range::new(1.0, 5000.0, "um/s");
+/// The stage's response time constant.
+const STAGE_LAG_MS: Range = Range::new(0.1, 1000.0, "ms");
+/// The S100's step is about 5 nm; 0.1 nm to 1 um covers piezo and slip-stick stages.
+const STAGE_RESOLUTION_NM: Range = Range::new(0.1, 1000.0, "nm");
+/// The S100 travels 12 mm.
+const STAGE_WORKSPACE_MM: Range = Range::new(0.1, 100.0, "mm");
+const CONTACT_AT_UM: Range = Range::new(0.1, 10_000.0, "um");
+/// From soft biological samples (1 mN/m) to hard contacts (10 kN/m).
+const SAMPLE_STIFFNESS_N_PER_M: Range = Range::new(0.001, 10_000.0, "N/m");
+/// A slow SEM scan (10 s a frame) to a fast camera; the renderer keeps up to 240 Hz.
+const SEM_RATE_HZ: Range = Range::new(0.1, 240.0, "Hz");
+const SEM_DELAY_MS: Range = Range::new(0.0, 2000.0, "ms");
+const SEM_WIDTH_PX: Range = Range::new(320.0, 2048.0, "px");
+const SEM_HEIGHT_PX: Range = Range::new(240.0, 2048.0, "px");
+/// Where the rendered probe still fits the frame and shows its tip.
+const SEM_MAGNIFICATION: Range = Range::new(500.0, 20_000.0, "");
+/// Magnification step times: within a day.
+const SEM_STEP_S: Range = Range::new(0.0, 86_400.0, "s");
+/// Stylus travel of a scripted move: a PHANToM's workspace is 70 to 380 mm across.
+const OPERATOR_TRAVEL_MM: Range = Range::new(0.1, 200.0, "mm");
+/// Felt tip forces, as `safety.max_contact_force_nn`.
+const OPERATOR_FORCE_NN: Range = Range::new(1.0, 1e7, "nN");
+const OPERATOR_TIME_S: Range = Range::new(0.01, 3600.0, "s");
+/// A relaxed to a braced human hand holds a stylus with 0.1 to a few N/mm.
+const HAND_STIFFNESS_N_PER_MM: Range = Range::new(0.01, 10.0, "N/mm");
+/// A PHANToM stylus's apparent mass is 45 to 75 g.
+const STYLUS_MASS_KG: Range = Range::new(0.001, 1.0, "kg");
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,11 +70,11 @@ struct RawSample {
 struct RawSem {
     rate_hz: Option<f64>,
     delay_ms: Option<f64>,
-    width: Option<u32>,
-    height: Option<u32>,
+    width: Option<i64>,
+    height: Option<i64>,
     style: Option<String>,
     seed: Option<u64>,
-    magnification: Option<Vec<[f64; 2]>>,
+    magnification: Option<Vec<List<f64, 2>>>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -117,68 +149,79 @@ pub const STYLES: [&str; 4] = ["clean", "clutter", "noisy", "harsh"];
 impl SimConfig {
     pub(crate) fn validate(raw: RawSim, check: &Checker) -> Result<SimConfig, ConfigError> {
         let d = SimConfig::default();
-        let pos = |key: &str, v: Option<f64>, default: f64| match v {
-            Some(v) => check.positive(key, v),
-            None => Ok(default),
+        let num = |key: &str, v: Option<f64>, default: f64, range: Range| {
+            check.number_or(key, v, default, range)
         };
         let st = raw.stage.unwrap_or_default();
         let stage = StageParams {
-            speed_limit_um_per_s: pos(
+            speed_limit_um_per_s: num(
                 "sim.stage.speed_limit_um_per_s",
                 st.speed_limit_um_per_s,
                 d.stage.speed_limit_um_per_s,
+                STAGE_SPEED_UM_PER_S,
             )?,
-            lag_ms: pos("sim.stage.lag_ms", st.lag_ms, d.stage.lag_ms)?,
-            resolution_nm: pos(
+            lag_ms: num("sim.stage.lag_ms", st.lag_ms, d.stage.lag_ms, STAGE_LAG_MS)?,
+            resolution_nm: num(
                 "sim.stage.resolution_nm",
                 st.resolution_nm,
                 d.stage.resolution_nm,
+                STAGE_RESOLUTION_NM,
             )?,
-            workspace_mm: pos(
+            workspace_mm: num(
                 "sim.stage.workspace_mm",
                 st.workspace_mm,
                 d.stage.workspace_mm,
+                STAGE_WORKSPACE_MM,
             )?,
         };
         let sa = raw.sample.unwrap_or_default();
         let sample = SampleParams {
-            contact_at_um: pos(
+            contact_at_um: num(
                 "sim.sample.contact_at_um",
                 sa.contact_at_um,
                 d.sample.contact_at_um,
+                CONTACT_AT_UM,
             )?,
-            stiffness_n_per_m: pos(
+            stiffness_n_per_m: num(
                 "sim.sample.stiffness_n_per_m",
                 sa.stiffness_n_per_m,
                 d.sample.stiffness_n_per_m,
+                SAMPLE_STIFFNESS_N_PER_M,
             )?,
         };
         let sem = Self::sem(raw.sem.unwrap_or_default(), check, &d.sem)?;
         let o = raw.operator.unwrap_or_default();
         let od = &d.operator;
+        let travel =
+            |key: &str, v: Option<f64>, default: f64| num(key, v, default, OPERATOR_TRAVEL_MM);
+        let force =
+            |key: &str, v: Option<f64>, default: f64| num(key, v, default, OPERATOR_FORCE_NN);
+        let time = |key: &str, v: Option<f64>, default: f64| num(key, v, default, OPERATOR_TIME_S);
         let operator = OperatorParams {
-            approach_mm: pos("sim.operator.approach_mm", o.approach_mm, od.approach_mm)?,
-            press_mm: pos("sim.operator.press_mm", o.press_mm, od.press_mm)?,
-            retract_mm: pos("sim.operator.retract_mm", o.retract_mm, od.retract_mm)?,
-            touch_nn: pos("sim.operator.touch_nn", o.touch_nn, od.touch_nn)?,
-            target_force_nn: pos(
+            approach_mm: travel("sim.operator.approach_mm", o.approach_mm, od.approach_mm)?,
+            press_mm: travel("sim.operator.press_mm", o.press_mm, od.press_mm)?,
+            retract_mm: travel("sim.operator.retract_mm", o.retract_mm, od.retract_mm)?,
+            touch_nn: force("sim.operator.touch_nn", o.touch_nn, od.touch_nn)?,
+            target_force_nn: force(
                 "sim.operator.target_force_nn",
                 o.target_force_nn,
                 od.target_force_nn,
             )?,
-            hold_s: pos("sim.operator.hold_s", o.hold_s, od.hold_s)?,
-            retract_s: pos("sim.operator.retract_s", o.retract_s, od.retract_s)?,
-            rest_s: pos("sim.operator.rest_s", o.rest_s, od.rest_s)?,
-            give_up_s: pos("sim.operator.give_up_s", o.give_up_s, od.give_up_s)?,
-            hand_stiffness_n_per_mm: pos(
+            hold_s: time("sim.operator.hold_s", o.hold_s, od.hold_s)?,
+            retract_s: time("sim.operator.retract_s", o.retract_s, od.retract_s)?,
+            rest_s: time("sim.operator.rest_s", o.rest_s, od.rest_s)?,
+            give_up_s: time("sim.operator.give_up_s", o.give_up_s, od.give_up_s)?,
+            hand_stiffness_n_per_mm: num(
                 "sim.operator.hand_stiffness_n_per_mm",
                 o.hand_stiffness_n_per_mm,
                 od.hand_stiffness_n_per_mm,
+                HAND_STIFFNESS_N_PER_MM,
             )?,
-            stylus_mass_kg: pos(
+            stylus_mass_kg: num(
                 "sim.operator.stylus_mass_kg",
                 o.stylus_mass_kg,
                 od.stylus_mass_kg,
+                STYLUS_MASS_KG,
             )?,
         };
         Ok(SimConfig {
@@ -190,18 +233,10 @@ impl SimConfig {
     }
 
     fn sem(raw: RawSem, check: &Checker, d: &SemParams) -> Result<SemParams, ConfigError> {
-        let pos = |key: &str, v: Option<f64>, default: f64| match v {
-            Some(v) => check.positive(key, v),
+        let size = |key: &str, v: Option<i64>, default: u32, range: Range| match v {
             None => Ok(default),
-        };
-        let size = |key: &str, v: Option<u32>, default: u32, range: (u32, u32)| match v {
-            None => Ok(default),
-            Some(v) if (range.0..=range.1).contains(&v) => Ok(v),
-            Some(v) => Err(check.invalid(
-                key,
-                v,
-                &format!("must be in [{}, {}] pixels", range.0, range.1),
-            )),
+            // In range, so it fits.
+            Some(v) => check.whole(key, v, range).map(|v| v as u32),
         };
         let style = match raw.style {
             None => d.style.clone(),
@@ -214,13 +249,6 @@ impl SimConfig {
                 ))
             }
         };
-        let check_mag = |key: &str, m: f64| {
-            if (500.0..=20_000.0).contains(&m) {
-                Ok(m)
-            } else {
-                Err(check.invalid(key, m, "must be a magnification in [500, 20000]"))
-            }
-        };
         let magnification = match raw.magnification {
             None => d.magnification.clone(),
             Some(steps) if steps.is_empty() => {
@@ -231,40 +259,32 @@ impl SimConfig {
                 ))
             }
             Some(steps) => {
-                let mut out = Vec::with_capacity(steps.len());
-                for [t, m] in steps {
-                    if !(t.is_finite() && t >= 0.0) || out.last().is_some_and(|(prev, _)| t < *prev)
-                    {
+                let mut out: Vec<(f64, f64)> = Vec::with_capacity(steps.len());
+                for (i, List([t, m])) in steps.into_iter().enumerate() {
+                    let key = format!("sim.sem.magnification[{i}]");
+                    let t = check.number(&format!("{key}[0]"), t, SEM_STEP_S)?;
+                    if out.last().is_some_and(|(prev, _)| t < *prev) {
                         return Err(check.invalid(
-                            "sim.sem.magnification",
+                            &format!("{key}[0]"),
                             t,
-                            "times must be finite, >= 0 and increasing",
+                            "must not be earlier than the step before (times increase)",
                         ));
                     }
-                    out.push((t, check_mag("sim.sem.magnification", m)?));
+                    out.push((t, check.number(&format!("{key}[1]"), m, SEM_MAGNIFICATION)?));
                 }
                 out
             }
         };
-        let rate_hz = pos("sim.sem.rate_hz", raw.rate_hz, d.rate_hz)?;
-        if rate_hz > 240.0 {
-            return Err(check.invalid("sim.sem.rate_hz", rate_hz, "must be at most 240 Hz"));
-        }
         Ok(SemParams {
-            rate_hz,
-            delay_ms: match raw.delay_ms {
-                Some(v) if v.is_finite() && v >= 0.0 => v,
-                Some(v) => {
-                    return Err(check.invalid(
-                        "sim.sem.delay_ms",
-                        v,
-                        "must be a finite number >= 0",
-                    ))
-                }
-                None => d.delay_ms,
-            },
-            width: size("sim.sem.width", raw.width, d.width, (320, 2048))?,
-            height: size("sim.sem.height", raw.height, d.height, (240, 2048))?,
+            rate_hz: check.number_or("sim.sem.rate_hz", raw.rate_hz, d.rate_hz, SEM_RATE_HZ)?,
+            delay_ms: check.number_or(
+                "sim.sem.delay_ms",
+                raw.delay_ms,
+                d.delay_ms,
+                SEM_DELAY_MS,
+            )?,
+            width: size("sim.sem.width", raw.width, d.width, SEM_WIDTH_PX)?,
+            height: size("sim.sem.height", raw.height, d.height, SEM_HEIGHT_PX)?,
             style,
             seed: raw.seed.unwrap_or(d.seed),
             magnification,

@@ -11,8 +11,19 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, List, Range};
 use crate::hw::config::{backend_name, in_range, only_for, required, DaqBackend};
+
+// The accepted ranges, documented with the same words in config/lab.example.toml.
+/// DAQ analog outputs span at most +-10 V (a few boards +-20 V).
+const VOLTS: Range = Range::new(-20.0, 20.0, "V");
+/// 10 V per um/s saturates a +-10 V output at 1 um/s; below 1e-4 V per um/s the full
+/// output would command 0.1 m/s. 0 would never move the axis.
+const VOLTS_PER_UM_S: Range = Range::new(-10.0, 10.0, "V per um/s").except_zero();
+/// From a 100 um step to a 0.1 nm step, finer than any stage resolves.
+const PULSES_PER_UM: Range = Range::new(0.01, 10_000.0, "pulses/um");
+/// An NI E-series counter divides a 20 MHz timebase: 5 MHz is the fastest usable train.
+const MAX_RATE_HZ: Range = Range::new(1.0, 5e6, "Hz");
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -32,7 +43,7 @@ struct RawAxis {
     subdevice: Option<i64>,
     channel: Option<i64>,
     range: Option<i64>,
-    range_v: Option<[f64; 2]>,
+    range_v: Option<List<f64, 2>>,
     volts_per_um_s: Option<f64>,
     zero_v: Option<f64>,
     counter_subdevice: Option<i64>,
@@ -160,7 +171,7 @@ impl RawAxis {
         ];
         let subdevice = |v: Option<i64>, name: &str| -> Result<u32, ConfigError> {
             let v = required(check, &k(name), "comedi", v)?;
-            in_range(check, &k(name), v, 0, 255)
+            in_range(check, &k(name), v, (0, 255), "")
         };
         match self.output.as_deref() {
             Some("analog") => {
@@ -171,16 +182,20 @@ impl RawAxis {
                             "{key}: give range (an index) or range_v ([min, max] volts), not both"
                         )))
                     }
-                    (Some(i), None) => RangeChoice::Index(in_range(check, &k("range"), i, 0, 255)?),
-                    (None, Some([min_v, max_v])) if min_v.is_finite() && max_v > min_v => {
-                        RangeChoice::Volts { min_v, max_v }
+                    (Some(i), None) => {
+                        RangeChoice::Index(in_range(check, &k("range"), i, (0, 255), "")?)
                     }
-                    (None, Some(v)) => {
-                        return Err(check.invalid(
-                            &k("range_v"),
-                            format_args!("{v:?}"),
-                            "must be [min, max] volts with min < max",
-                        ))
+                    (None, Some(List([min_v, max_v]))) => {
+                        let min_v = check.number(&format!("{key}.range_v[0]"), min_v, VOLTS)?;
+                        let max_v = check.number(&format!("{key}.range_v[1]"), max_v, VOLTS)?;
+                        if max_v <= min_v {
+                            return Err(check.invalid(
+                                &k("range_v"),
+                                format_args!("{:?}", [min_v, max_v]),
+                                "must be [min, max] volts with min < max",
+                            ));
+                        }
+                        RangeChoice::Volts { min_v, max_v }
                     }
                     (None, None) => RangeChoice::Volts {
                         min_v: -10.0,
@@ -188,14 +203,8 @@ impl RawAxis {
                     },
                 };
                 let volts = required(check, &k("volts_per_um_s"), "comedi", self.volts_per_um_s)?;
-                if !(volts.is_finite() && volts != 0.0) {
-                    let reason = "must be a finite, non-zero number";
-                    return Err(check.invalid(&k("volts_per_um_s"), volts, reason));
-                }
-                let zero_v = self.zero_v.unwrap_or(0.0);
-                if !zero_v.is_finite() {
-                    return Err(check.invalid(&k("zero_v"), zero_v, "must be finite"));
-                }
+                let volts = check.number(&k("volts_per_um_s"), volts, VOLTS_PER_UM_S)?;
+                let zero_v = check.number_or(&k("zero_v"), self.zero_v, 0.0, VOLTS)?;
                 Ok(AxisOutput::Analog(AnalogAxis {
                     subdevice: subdevice(self.subdevice, "subdevice")?,
                     channel: subdevice(self.channel, "channel")?,
@@ -207,16 +216,13 @@ impl RawAxis {
             Some("step_dir") => {
                 only_for(check, key, "output = \"step_dir\"", &analog_keys)?;
                 let pulses = required(check, &k("pulses_per_um"), "comedi", self.pulses_per_um)?;
-                let max_rate_hz = self.max_rate_hz.unwrap_or(100_000.0);
-                if !(max_rate_hz.is_finite() && max_rate_hz > 0.0 && max_rate_hz <= 5e6) {
-                    let reason = "must be in (0, 5e6] Hz";
-                    return Err(check.invalid(&k("max_rate_hz"), max_rate_hz, reason));
-                }
+                let max_rate_hz =
+                    check.number_or(&k("max_rate_hz"), self.max_rate_hz, 100_000.0, MAX_RATE_HZ)?;
                 Ok(AxisOutput::StepDir(StepDirAxis {
                     counter_subdevice: subdevice(self.counter_subdevice, "counter_subdevice")?,
                     dio_subdevice: subdevice(self.dio_subdevice, "dio_subdevice")?,
                     direction_channel: subdevice(self.direction_channel, "direction_channel")?,
-                    pulses_per_um: check.positive(&k("pulses_per_um"), pulses)?,
+                    pulses_per_um: check.number(&k("pulses_per_um"), pulses, PULSES_PER_UM)?,
                     max_rate_hz,
                     invert_direction: self.invert_direction.unwrap_or(false),
                 }))
@@ -290,7 +296,8 @@ mod tests {
         let msg = error_of(&format!("{base}{}", AXES.replace("0.1", "0")));
         assert_eq!(
             msg,
-            "lab.toml: daq.x.volts_per_um_s must be a finite, non-zero number, got 0"
+            "lab.toml: daq.x.volts_per_um_s = 0 is out of range: \
+             accepted -10 to 10 V per um/s, not 0"
         );
         let msg = error_of(&format!("{base}{}", AXES.replace("\"none\"", "\"pwm\"")));
         assert!(
@@ -301,7 +308,10 @@ mod tests {
             "{base}{}",
             AXES.replace("channel = 0", "range = 1\nchannel = 300")
         ));
-        assert_eq!(msg, "lab.toml: daq.x.channel must be in 0..=255, got 300");
+        assert_eq!(
+            msg,
+            "lab.toml: daq.x.channel = 300 is out of range: accepted 0 to 255"
+        );
         let msg = error_of(&format!(
             "{base}{}",
             AXES.replace("pulses_per_um = 50", "zero_v = 1.0")

@@ -6,7 +6,10 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, Range};
+
+/// The frame rate asked of the driver: a slow SEM scan (10 s a frame) to a fast camera.
+const RATE_HZ: Range = Range::new(0.1, 1000.0, "Hz");
 use crate::hw::config::{backend_name, in_range, only_for, FramesBackend};
 
 #[derive(Debug, Default, Deserialize)]
@@ -125,16 +128,16 @@ impl RawFrames {
     fn size(&self, check: &Checker) -> Result<(Option<u32>, Option<u32>), ConfigError> {
         let w = self
             .width
-            .map(|w| in_range(check, "frames.width", w, 1, 16384));
+            .map(|w| in_range(check, "frames.width", w, (1, 16384), "px"));
         let h = self
             .height
-            .map(|h| in_range(check, "frames.height", h, 1, 16384));
+            .map(|h| in_range(check, "frames.height", h, (1, 16384), "px"));
         Ok((w.transpose()?, h.transpose()?))
     }
 
     fn timeout_ms(&self, check: &Checker, default: u64) -> Result<u64, ConfigError> {
         self.timeout_ms.map_or(Ok(default), |t| {
-            in_range(check, "frames.timeout_ms", t, 10, 600_000).map(u64::from)
+            in_range(check, "frames.timeout_ms", t, (10, 600_000), "ms").map(u64::from)
         })
     }
 
@@ -152,14 +155,10 @@ impl RawFrames {
             }
         };
         let (width, height) = self.size(check)?;
-        let rate_hz = match self.rate_hz {
-            None => 30.0,
-            Some(r) if r.is_finite() && r > 0.0 && r <= 1000.0 => r,
-            Some(r) => return Err(check.invalid("frames.rate_hz", r, "must be in (0, 1000]")),
-        };
+        let rate_hz = check.number_or("frames.rate_hz", self.rate_hz, 30.0, RATE_HZ)?;
         let buffers = self
             .buffers
-            .map_or(Ok(4), |b| in_range(check, "frames.buffers", b, 2, 32))?;
+            .map_or(Ok(4), |b| in_range(check, "frames.buffers", b, (2, 32), ""))?;
         let device = self.device.as_deref().unwrap_or("/dev/video0");
         if device.trim().is_empty() {
             return Err(check.invalid("frames.device", "\"\"", "must name a device"));
@@ -276,7 +275,7 @@ mod tests {
         );
         assert_eq!(
             error_of("[frames]\nbackend = \"v4l2\"\nwidth = 0\n"),
-            "lab.toml: frames.width must be in 1..=16384, got 0"
+            "lab.toml: frames.width = 0 is out of range: accepted 1 to 16384 px"
         );
         assert!(error_of("[frames]\nbackend = \"pipe\"\n").contains("missing frames.path"));
         assert_eq!(

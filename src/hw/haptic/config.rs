@@ -6,7 +6,13 @@
 //! `[haptic.force]`.
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError};
+use crate::config::{Checker, ConfigError, List, Range};
+
+/// The stylus travel a HID axis's raw span maps to: a PHANToM's workspace is 70 to
+/// 380 mm across.
+const TRAVEL_MM: Range = Range::new(1.0, 1000.0, "mm");
+/// A haptic device's force: the PHANToM Touch peaks at 3.3 N, the Premium 1.5 at 8.5 N.
+const FULL_SCALE_N: Range = Range::new(0.01, 10.0, "N");
 use crate::hw::config::{backend_name, in_range, only_for, required, HapticBackend};
 
 #[derive(Debug, Default, Deserialize)]
@@ -43,7 +49,7 @@ struct RawHidAxis {
 struct RawHidForce {
     report_id: i64,
     report_length: i64,
-    bytes: [i64; 3],
+    bytes: List<i64, 3>,
     full_scale_n: f64,
 }
 
@@ -121,7 +127,7 @@ impl RawHaptic {
             "openhaptics" => {
                 only_for(check, "haptic", &chosen, &hid_keys)?;
                 let stall_ms = self.stall_ms.map_or(Ok(50), |s| {
-                    in_range(check, "haptic.stall_ms", s, 5, 10_000).map(u64::from)
+                    in_range(check, "haptic.stall_ms", s, (5, 10_000), "ms").map(u64::from)
                 })?;
                 Ok(HapticBackend::OpenHaptics(OpenHapticsConfig {
                     library: self.library.unwrap_or_else(|| "libHD.so".into()),
@@ -144,16 +150,22 @@ impl RawHaptic {
     fn hid(self, check: &Checker) -> Result<HidConfig, ConfigError> {
         let id = |key: &str, v: Option<i64>| -> Result<u16, ConfigError> {
             let v = required(check, key, "hid", v)?;
-            in_range(check, key, v, 0, 0xffff).map(|v| v as u16)
+            in_range(check, key, v, (0, 0xffff), "").map(|v| v as u16)
         };
         let vendor_id = id("haptic.vendor_id", self.vendor_id)?;
         let product_id = id("haptic.product_id", self.product_id)?;
         let report_id = self
             .report_id
-            .map(|r| in_range(check, "haptic.report_id", r, 0, 255).map(|r| r as u8))
+            .map(|r| in_range(check, "haptic.report_id", r, (0, 255), "").map(|r| r as u8))
             .transpose()?;
         let report_length = required(check, "haptic.report_length", "hid", self.report_length)?;
-        let report_length = in_range(check, "haptic.report_length", report_length, 1, 1024)?;
+        let report_length = in_range(
+            check,
+            "haptic.report_length",
+            report_length,
+            (1, 1024),
+            "bytes",
+        )?;
         let mut axes = Vec::with_capacity(3);
         for (name, raw) in [("x", self.x), ("y", self.y), ("z", self.z)] {
             let key = format!("haptic.{name}");
@@ -174,9 +186,9 @@ impl RawHaptic {
 
 impl RawHidAxis {
     fn validate(self, check: &Checker, key: &str, length: usize) -> Result<HidAxis, ConfigError> {
-        let bits = in_range(check, &format!("{key}.bits"), self.bits, 1, 32)?;
+        let bits = in_range(check, &format!("{key}.bits"), self.bits, (1, 32), "")?;
         let last = 8 * length as i64 - i64::from(bits);
-        let bit = in_range(check, &format!("{key}.bit"), self.bit, 0, last)? as usize;
+        let bit = in_range(check, &format!("{key}.bit"), self.bit, (0, last), "")? as usize;
         if self.max <= self.min {
             return Err(check.invalid(
                 &format!("{key}.max"),
@@ -190,7 +202,7 @@ impl RawHidAxis {
             signed: self.signed.unwrap_or(false),
             min: self.min,
             max: self.max,
-            travel_mm: check.positive(&format!("{key}.travel_mm"), self.travel_mm)?,
+            travel_mm: check.number(&format!("{key}.travel_mm"), self.travel_mm, TRAVEL_MM)?,
             invert: self.invert.unwrap_or(false),
         })
     }
@@ -198,23 +210,39 @@ impl RawHidAxis {
 
 impl RawHidForce {
     fn validate(self, check: &Checker) -> Result<HidForce, ConfigError> {
-        let report_id = in_range(check, "haptic.force.report_id", self.report_id, 0, 255)?;
+        let report_id = in_range(
+            check,
+            "haptic.force.report_id",
+            self.report_id,
+            (0, 255),
+            "",
+        )?;
         let length = in_range(
             check,
             "haptic.force.report_length",
             self.report_length,
-            7,
-            1024,
+            (7, 1024),
+            "bytes",
         )?;
         let mut bytes = [0usize; 3];
-        for (slot, b) in bytes.iter_mut().zip(self.bytes) {
-            *slot = in_range(check, "haptic.force.bytes", b, 1, i64::from(length) - 2)? as usize;
+        for (slot, b) in bytes.iter_mut().zip(self.bytes.0) {
+            *slot = in_range(
+                check,
+                "haptic.force.bytes",
+                b,
+                (1, i64::from(length) - 2),
+                "",
+            )? as usize;
         }
         Ok(HidForce {
             report_id: report_id as u8,
             report_length: length as usize,
             bytes,
-            full_scale_n: check.positive("haptic.force.full_scale_n", self.full_scale_n)?,
+            full_scale_n: check.number(
+                "haptic.force.full_scale_n",
+                self.full_scale_n,
+                FULL_SCALE_N,
+            )?,
         })
     }
 }
@@ -263,13 +291,19 @@ mod tests {
     #[test]
     fn hid_errors_name_key_and_value() {
         let msg = error_of(&JOYSTICK.replace("bit = 40", "bit = 50"));
-        assert_eq!(msg, "lab.toml: haptic.z.bit must be in 0..=48, got 50");
+        assert_eq!(
+            msg,
+            "lab.toml: haptic.z.bit = 50 is out of range: accepted 0 to 48"
+        );
         let msg = error_of(&JOYSTICK.replace("bits = 8", "bits = 33"));
-        assert_eq!(msg, "lab.toml: haptic.z.bits must be in 1..=32, got 33");
+        assert_eq!(
+            msg,
+            "lab.toml: haptic.z.bits = 33 is out of range: accepted 1 to 32"
+        );
         let msg = error_of(&JOYSTICK.replace("product_id = 0xc215", "product_id = 70000"));
         assert_eq!(
             msg,
-            "lab.toml: haptic.product_id must be in 0..=65535, got 70000"
+            "lab.toml: haptic.product_id = 70000 is out of range: accepted 0 to 65535"
         );
         let msg = error_of("[haptic]\nbackend = \"openhaptics\"\nvendor_id = 1\n");
         assert_eq!(
