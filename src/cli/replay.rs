@@ -226,7 +226,7 @@ fn check_outputs(
     inputs.insert(resolved(&args.config), config);
     if let Some(reference) = reference {
         let what = format!("the reference image {}", reference.display());
-        inputs.insert(resolved(&reference), what);
+        inputs.insert(resolved(reference), what);
     }
     let csv = resolved(&args.csv);
     if let Some(input) = inputs.get(&csv) {
