@@ -155,3 +155,29 @@ fn clicks_and_apex_counted_from_the_corner() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("\"middle\""), "{err}");
 }
+
+#[test]
+fn the_overlay_never_overwrites_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("reference.png");
+    for overlay in [
+        image.clone(),
+        dir.path().join("./reference.png"),
+        dir.path().join("sub/../reference.png"),
+    ] {
+        let out = calibrate(dir.path(), &["--overlay", overlay.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("is the --image itself"),
+            "{overlay:?}: {err}"
+        );
+        assert!(out.stdout.is_empty(), "nothing printed before the refusal");
+        let reference =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/samples/mixed/reference.png");
+        assert_eq!(
+            std::fs::read(&image).unwrap(),
+            std::fs::read(reference).unwrap(),
+            "the reference frame is untouched"
+        );
+    }
+}

@@ -349,3 +349,102 @@ fn bad_inputs_are_clear_errors() {
         "{err}"
     );
 }
+
+/// The bytes of every file in `dir`, by name.
+fn snapshot(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let bytes = std::fs::read(e.path()).unwrap_or_default();
+            (e.file_name().to_string_lossy().to_string(), bytes)
+        })
+        .collect()
+}
+
+#[test]
+fn outputs_that_would_overwrite_inputs_are_refused_before_writing() {
+    let (dir, _src, frames) = session_copy("mixed", 2);
+    let root = dir.path();
+    let frames_dir = root.join("frames");
+    std::fs::create_dir(&frames_dir).unwrap();
+    frames[0].save(frames_dir.join("x.png")).unwrap();
+    frames[1].save(frames_dir.join("reference.png")).unwrap();
+    let config = root.join("probe.toml");
+    let before = (snapshot(root), snapshot(&frames_dir));
+    let csv = root.join("out.csv");
+    let refused = |extra: &[&str], csv: &Path, want: &str| {
+        let out = replay(&frames_dir, &config, csv, extra);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{extra:?} accepted: {err}");
+        assert!(err.contains(want), "{extra:?}: {err}");
+    };
+    let overlay = |dir: &Path| ["--overlay".to_string(), dir.display().to_string()];
+    // The frames folder itself, spelled plainly, with `..` and through a symbolic link.
+    for spelling in [
+        frames_dir.clone(),
+        frames_dir.join("../frames"),
+        root.join("./frames/"),
+    ] {
+        let args = overlay(&spelling);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        refused(&args, &csv, "is the frames folder");
+    }
+    let link = root.join("link");
+    std::os::unix::fs::symlink(&frames_dir, &link).unwrap();
+    let args = overlay(&link);
+    refused(&[&args[0], &args[1]], &csv, "is the frames folder");
+    // The session folder: frames/reference.png's overlay would be the reference image.
+    let args = overlay(root);
+    refused(
+        &[&args[0], &args[1]],
+        &csv,
+        "would overwrite the reference image",
+    );
+    // The CSV onto a frame or the configuration.
+    refused(&[], &frames_dir.join("x.png"), "is the frame");
+    refused(&[], &link.join("x.png"), "is the frame");
+    refused(&[], &config, "is the configuration");
+    std::fs::remove_file(&link).unwrap();
+    assert_eq!(
+        (snapshot(root), snapshot(&frames_dir)),
+        before,
+        "nothing written"
+    );
+}
+
+#[test]
+fn frames_differing_only_in_extension_get_distinct_overlays() {
+    let (dir, _src, frames) = session_copy("mixed", 2);
+    let frames_dir = dir.path().join("frames");
+    std::fs::create_dir(&frames_dir).unwrap();
+    frames[0].save(frames_dir.join("x.png")).unwrap();
+    frames[1].save(frames_dir.join("x.tif")).unwrap();
+    frames[1].save(frames_dir.join("y.pgm")).unwrap();
+    let overlays = dir.path().join("overlays");
+    let config = dir.path().join("probe.toml");
+    let csv = dir.path().join("out.csv");
+    let args = ["--overlay", overlays.to_str().unwrap()];
+    let out = replay(&frames_dir, &config, &csv, &args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let names: Vec<String> = snapshot(&overlays).into_keys().collect();
+    assert_eq!(names, ["x.png", "x.tif.png", "y.pgm.png"]);
+    let a = image::open(overlays.join("x.png")).unwrap().into_rgb8();
+    let b = image::open(overlays.join("x.tif.png")).unwrap().into_rgb8();
+    assert_ne!(a, b, "each overlay drawn on its own frame");
+    // A PNG frame named like another frame's overlay: refused, nothing written.
+    frames[0].save(frames_dir.join("x.tif.png")).unwrap();
+    std::fs::remove_dir_all(&overlays).unwrap();
+    std::fs::remove_file(&csv).unwrap();
+    let out = replay(&frames_dir, &config, &csv, &args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("would both write the overlay x.tif.png"),
+        "{err}"
+    );
+    assert!(!overlays.exists() && !csv.exists(), "nothing written");
+}

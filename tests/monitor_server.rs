@@ -135,3 +135,161 @@ fn monitor_serves_caps_pages_and_keeps_thumbnails() {
     assert!(html.contains("<td>Haptic loop</td>") && html.contains("Force error"));
     assert!(html.matches("data:image/png;base64,").count() >= 3 + 4);
 }
+
+/// Keeps `n` idle connections to `port` open until `stop`: one the server closes is
+/// opened again at once (an attacker holding places). Returns how many it opened.
+fn hold_idle_connections(
+    port: u16,
+    n: usize,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<usize> {
+    std::thread::spawn(move || {
+        let connect = || {
+            let s = TcpStream::connect(("127.0.0.1", port)).ok()?;
+            s.set_nonblocking(true).ok()?;
+            Some(s)
+        };
+        let mut open: Vec<Option<TcpStream>> = (0..n).map(|_| connect()).collect();
+        let mut opened = n;
+        let mut buf = [0u8; 256];
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            for slot in &mut open {
+                let closed = match slot {
+                    Some(s) => match s.read(&mut buf) {
+                        Ok(_) => true,
+                        Err(e) => e.kind() != std::io::ErrorKind::WouldBlock,
+                    },
+                    None => true,
+                };
+                if closed {
+                    *slot = connect();
+                    opened += 1;
+                }
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        opened
+    })
+}
+
+/// Idle sockets and a slowloris (a byte a second) cannot starve the page: with more idle
+/// connections held open than the server keeps (each one the server closes is opened
+/// again), 24 requests in a row are all answered, each within two seconds. Two `Host`
+/// headers are a 400; `HEAD` gets the head alone; other methods a 405.
+#[test]
+fn idle_connections_do_not_starve_the_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let config = lab_config(dir.path(), &format!("listen = \"127.0.0.1:{port}\""));
+    let mut daemon = start_daemon(dir.path(), &config, 20.0);
+    wait_for_monitor(&mut daemon, port);
+    let host = format!("127.0.0.1:{port}");
+
+    // 16 idle connections: more than the 4 pages + 8 spare places the server keeps.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let attacker = hold_idle_connections(port, 16, stop.clone());
+    let slowloris = {
+        let request = format!(
+            "GET / HTTP/1.1\r\nHost: {host}\r\nX-Padding: {}",
+            "a".repeat(60)
+        );
+        std::thread::spawn(move || {
+            let Ok(mut s) = TcpStream::connect(("127.0.0.1", port)) else {
+                return 0;
+            };
+            let mut sent = 0;
+            for byte in request.bytes().take(12) {
+                if s.write_all(&[byte]).is_err() {
+                    break;
+                }
+                sent += 1;
+                std::thread::sleep(Duration::from_secs(1));
+            }
+            sent
+        })
+    };
+    std::thread::sleep(Duration::from_millis(500));
+    let started = Instant::now();
+    let mut slowest = Duration::ZERO;
+    let mut answered = 0;
+    for _ in 0..24 {
+        let t = Instant::now();
+        let (head, body) = http_raw(
+            port,
+            &format!("GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"),
+            Duration::from_secs(3),
+        );
+        if head.starts_with("HTTP/1.1 200") && body.len() > 1000 {
+            answered += 1;
+        }
+        slowest = slowest.max(t.elapsed());
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let opened = attacker.join().unwrap();
+    eprintln!(
+        "{answered} of 24 requests answered beside 16 held idle connections ({opened} opened) \
+         and a slowloris: {:?} in all, slowest {slowest:?}",
+        started.elapsed()
+    );
+    assert_eq!(answered, 24, "requests answered beside idle connections");
+    assert!(
+        slowest < Duration::from_secs(2),
+        "slowest of 24 requests: {slowest:?}"
+    );
+    let _ = slowloris.join();
+
+    let (head, _) = http_raw(
+        port,
+        &format!("GET / HTTP/1.1\r\nHost: {host}\r\nHost: evil.example\r\n\r\n"),
+        Duration::from_secs(3),
+    );
+    assert!(head.starts_with("HTTP/1.1 400"), "two Host headers: {head}");
+    let (head, body) = http_raw(
+        port,
+        &format!("HEAD / HTTP/1.1\r\nHost: {host}\r\n\r\n"),
+        Duration::from_secs(3),
+    );
+    let length = head
+        .lines()
+        .find_map(|l| l.strip_prefix("Content-Length: "))
+        .and_then(|v| v.trim().parse::<usize>().ok());
+    assert!(head.starts_with("HTTP/1.1 200"), "HEAD: {head}");
+    assert!(
+        length.is_some_and(|n| n > 1000),
+        "HEAD: the page's length: {head}"
+    );
+    assert!(body.is_empty(), "HEAD: no body, got {} bytes", body.len());
+    let (head, _) = http_raw(
+        port,
+        &format!("POST / HTTP/1.1\r\nHost: {host}\r\n\r\n"),
+        Duration::from_secs(3),
+    );
+    assert!(
+        head.starts_with("HTTP/1.1 405") && head.contains("Allow: GET, HEAD"),
+        "{head}"
+    );
+    let _ = daemon.kill();
+    let _ = daemon.wait();
+}
+
+/// A page served beyond loopback (`allow_remote`) is announced as a warning.
+#[test]
+fn allow_remote_is_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let config = lab_config(
+        dir.path(),
+        &format!("listen = \"0.0.0.0:{port}\"\nallow_remote = true"),
+    );
+    let daemon = start_daemon(dir.path(), &config, 1.0);
+    let out = daemon.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let line = err
+        .lines()
+        .find(|l| l.contains("monitor page"))
+        .unwrap_or_else(|| panic!("no monitor line: {err}"));
+    assert!(
+        line.contains("WARN") && line.contains("allow_remote"),
+        "{line}"
+    );
+}

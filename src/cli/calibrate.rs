@@ -86,6 +86,17 @@ fn parse_threshold(s: &str) -> Result<Threshold, String> {
 }
 
 pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
+    let overlay_path = args
+        .overlay
+        .clone()
+        .unwrap_or_else(|| args.image.with_file_name("calibration-overlay.png"));
+    if super::replay::resolved(&overlay_path) == super::replay::resolved(&args.image) {
+        anyhow::bail!(
+            "the overlay {} is the --image itself: refusing to overwrite the reference \
+             frame; give another --overlay",
+            overlay_path.display()
+        );
+    }
     let reference = load_gray(&args.image)?;
     let clicks = CalibrationConfig {
         reference_image: args.image.clone(),
@@ -106,9 +117,6 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
     let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
         .with_context(|| format!("calibrating on {}", args.image.display()))?;
     print!("{}", calibration_block(&clicks, &calibration, origin));
-    let overlay_path = args
-        .overlay
-        .unwrap_or_else(|| args.image.with_file_name("calibration-overlay.png"));
     draw_calibration(&reference, &calibration)
         .save(&overlay_path)
         .with_context(|| format!("writing {}", overlay_path.display()))?;

@@ -1,8 +1,14 @@
 //! `nanoforce replay`: runs the tracker over a recorded session's frames and writes the
 //! results CSV (and, on request, Figure-8 style overlays).
+//!
+//! Outputs never overwrite inputs: before anything is written, the CSV and every overlay
+//! path are compared (after resolving symbolic links, `.` and `..`) with the frames, the
+//! configuration and its reference image, and an overlay folder that is the frames folder
+//! is refused. Overlay names are collision-free: see [`overlay_name`].
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -35,7 +41,13 @@ magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/The
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
 pixels), miss (why not detected) and, with --timing, processing_ms. Without --timing the \
-CSV is identical from run to run.",
+CSV is identical from run to run.\n\n\
+Overlays (--overlay DIR) are PNG files named after their frame: a PNG frame keeps its \
+name (frame_00001.png), any other frame gets its full name plus .png (frame_00001.tif \
+becomes frame_00001.tif.png), so x.png and x.tif never share an overlay. Outputs never \
+overwrite inputs: an overlay folder that is the frames folder, or a CSV or overlay path \
+that is a frame, the configuration or its reference image, is refused before anything \
+is written.",
     after_help = "Example:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
 python3 score.py session/truth.csv out.csv"
 )]
@@ -80,7 +92,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let config = Config::load(&args.config)?;
     let mut tracker = tracker_from_config(&config)?;
     tracker.set_coherence(!args.no_coherence);
-    let summary = replay(&mut tracker, &args)?;
+    let reference = config
+        .tracker
+        .calibration
+        .as_ref()
+        .map(|c| c.reference_image.as_path());
+    let summary = replay(&mut tracker, &args, reference)?;
     eprintln!(
         "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,
@@ -98,9 +115,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`.
-pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<ReplaySummary> {
+/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`;
+/// `reference` is the configuration's reference image (an input the outputs must spare).
+pub fn replay(
+    tracker: &mut Tracker,
+    args: &ReplayArgs,
+    reference: Option<&Path>,
+) -> anyhow::Result<ReplaySummary> {
     let frames = list_frames(&args.frames_dir)?;
+    let overlay_names = check_outputs(args, &frames, reference)?;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
@@ -118,7 +141,7 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
         metadata_warnings: 0,
         median_ms: None,
     };
-    for path in &frames {
+    for (path, overlay_name) in frames.iter().zip(&overlay_names) {
         let name = path
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().to_string());
@@ -134,7 +157,10 @@ pub fn replay(tracker: &mut Tracker, args: &ReplayArgs) -> anyhow::Result<Replay
                 let written = estimate.with_pixel_origin(tracker.pixel_origin());
                 results::write_row(&mut csv, &name, &written, &sem, ms_column)?;
                 if let Some(dir) = &args.overlay {
-                    write_overlay(dir, path, &draw_overlay(&image, &estimate))?;
+                    let out = dir.join(overlay_name);
+                    draw_overlay(&image, &estimate)
+                        .save(&out)
+                        .with_context(|| format!("writing {}", out.display()))?;
                 }
             }
             Err(e) => {
@@ -170,14 +196,103 @@ fn frame_metadata(path: &Path, summary: &mut ReplaySummary, progress: &ProgressB
     sem
 }
 
-fn write_overlay(dir: &Path, frame: &Path, overlay: &image::RgbImage) -> anyhow::Result<()> {
-    let stem = frame
-        .file_stem()
-        .map_or_else(|| "frame".into(), |s| s.to_string_lossy().to_string());
-    let out = dir.join(format!("{stem}.png"));
-    overlay
-        .save(&out)
-        .with_context(|| format!("writing {}", out.display()))
+/// The overlay file name of `frame`: a PNG frame keeps its name (`x.png`), any other
+/// frame gets its whole name plus `.png` (`x.tif.png`), so frames that differ only in
+/// their extension get distinct overlays.
+pub fn overlay_name(frame: &Path) -> String {
+    let name = frame
+        .file_name()
+        .map_or_else(|| "frame".into(), |n| n.to_string_lossy().to_string());
+    let is_png = frame
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    match frame.file_stem() {
+        Some(stem) if is_png => format!("{}.png", stem.to_string_lossy()),
+        _ => format!("{name}.png"),
+    }
+}
+
+/// Refuses outputs that would overwrite an input; returns each frame's overlay name.
+fn check_outputs(
+    args: &ReplayArgs,
+    frames: &[PathBuf],
+    reference: Option<&Path>,
+) -> anyhow::Result<Vec<String>> {
+    let mut inputs: HashMap<PathBuf, String> = HashMap::new();
+    for frame in frames {
+        inputs.insert(resolved(frame), format!("the frame {}", frame.display()));
+    }
+    let config = format!("the configuration {}", args.config.display());
+    inputs.insert(resolved(&args.config), config);
+    if let Some(reference) = reference {
+        let what = format!("the reference image {}", reference.display());
+        inputs.insert(resolved(reference), what);
+    }
+    let csv = resolved(&args.csv);
+    if let Some(input) = inputs.get(&csv) {
+        anyhow::bail!(
+            "--csv {} is {input}: refusing to overwrite an input",
+            args.csv.display()
+        );
+    }
+    let names: Vec<String> = frames.iter().map(|f| overlay_name(f)).collect();
+    let Some(dir) = &args.overlay else {
+        return Ok(names);
+    };
+    let out_dir = resolved(dir);
+    if out_dir == resolved(&args.frames_dir) {
+        anyhow::bail!(
+            "--overlay {} is the frames folder: the overlays would overwrite or join the \
+             frames; give another folder",
+            dir.display()
+        );
+    }
+    let mut taken: HashMap<&str, &Path> = HashMap::new();
+    for (frame, name) in frames.iter().zip(&names) {
+        if let Some(other) = taken.insert(name, frame) {
+            anyhow::bail!(
+                "frames {} and {} would both write the overlay {name}; rename one",
+                other.display(),
+                frame.display()
+            );
+        }
+        let out = out_dir.join(name);
+        if let Some(input) = inputs.get(&out) {
+            anyhow::bail!(
+                "the overlay of {} would overwrite {input}: refusing; give another \
+                 --overlay folder",
+                frame.display()
+            );
+        }
+        if out == csv {
+            anyhow::bail!(
+                "the overlay of {} would overwrite the --csv file {}",
+                frame.display(),
+                args.csv.display()
+            );
+        }
+    }
+    Ok(names)
+}
+
+/// `path` made absolute with every symbolic link, `.` and `..` resolved, also when its
+/// last components do not exist yet (an output about to be created).
+pub(crate) fn resolved(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = PathBuf::new();
+    for component in absolute.components() {
+        match component {
+            Component::ParentDir => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            other => out.push(other),
+        }
+        if let Ok(real) = out.canonicalize() {
+            out = real;
+        }
+    }
+    out
 }
 
 fn progress_bar(len: usize) -> ProgressBar {

@@ -104,8 +104,13 @@ pub fn start(
             .name("monitor".into())
             .spawn(move || run(listener, hub, producer, &stop))?
     };
-    if let Some(addr) = local_addr {
-        tracing::info!("monitor page: http://{addr}/");
+    match local_addr {
+        Some(addr) if loopback_only => tracing::info!("monitor page: http://{addr}/"),
+        Some(addr) => tracing::warn!(
+            "monitor page on the network (monitor.allow_remote), with no authentication: \
+             http://{addr}/"
+        ),
+        None => {}
     }
     Ok(MonitorHandle {
         thread: Some(thread),

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 
 use super::ReportError;
 use crate::config::{Config, PixelOrigin};
-use crate::session::results::{read_results, split_csv_line, ResultRow};
+use crate::session::csv::Table;
+use crate::session::results::{read_results, ResultRow};
 use crate::session::score::{read_truth, score, Score, TruthRow};
 
 /// One tracked frame, whichever shape the session has.
@@ -193,9 +194,7 @@ fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportErro
 
 /// The daemon's `estimates.csv` (see `daemon::telemetry`).
 pub fn parse_estimates(text: &str) -> Result<Vec<FrameRow>, String> {
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    let header = split_csv_line(lines.next().ok_or("the file is empty")?);
-    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let table = Table::parse(text)?;
     let names = [
         "frame_seq",
         "frame_time_s",
@@ -208,25 +207,23 @@ pub fn parse_estimates(text: &str) -> Result<Vec<FrameRow>, String> {
         "processing_ms",
         "true_force_nN",
     ];
-    let cols = names.map(col);
+    let cols = names.map(|name| table.column(name));
     let [Some(seq), Some(time), Some(det), ..] = cols else {
         return Err("no frame_seq, frame_time_s and detected columns".into());
     };
     let [_, _, _, angle, force, tx, ty, conf, ms, truth] = cols;
     let mut rows = Vec::new();
-    for (k, line) in lines.enumerate() {
-        let cells = split_csv_line(line);
-        let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
-        let num = |i: Option<usize>| cell(i).parse::<f64>().ok().filter(|v| v.is_finite());
+    for record in &table.rows {
+        let num = |i: Option<usize>| record.number(i);
         let Some(t) = num(Some(time)) else {
             return Err(format!(
                 "row {}: frame_time_s is {:?}",
-                k + 2,
-                cell(Some(time))
+                record.line,
+                record.cell(Some(time))
             ));
         };
-        let frame_seq = cell(Some(seq)).parse::<u64>().ok();
-        let detected = cell(Some(det)) == "1";
+        let frame_seq = record.cell(Some(seq)).parse::<u64>().ok();
+        let detected = record.cell(Some(det)) == "1";
         rows.push(FrameRow {
             name: format!("frame {}", frame_seq.map_or("?".into(), |s| s.to_string())),
             t,

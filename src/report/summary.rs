@@ -2,12 +2,33 @@
 //! how many frames, how many detected, how accurate (against `truth.csv`, with
 //! `score.py`'s definitions, or against a simulated run's true force), how fast, and
 //! for a recording the loop and safety figures of its `stats.json`.
+//!
+//! A number that cannot be known prints as "n/a", never as a non-finite value or a
+//! division by (almost) zero: a force error relative to a true peak of 0, a loop rate of
+//! a run too short to have one, an error statistic over no frames. A single non-finite
+//! value prints as an empty cell.
 use serde_json::Value;
 
 use super::load::{Kind, SessionData};
 use crate::session::score::percentile;
 
 type Rows = Vec<(String, String)>;
+
+/// What a number that cannot be known prints as.
+pub const NOT_AVAILABLE: &str = "n/a";
+
+/// Fewest loop ticks a rate is shown for: ticks / duration is off by up to one tick, so a
+/// run shorter than this many loop periods has no meaningful rate.
+pub const MIN_TICKS_FOR_RATE: f64 = 10.0;
+
+/// `v` with `digits` decimals; empty when not finite.
+pub fn fixed(v: f64, digits: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$}")
+    } else {
+        String::new()
+    }
+}
 
 /// The rows for `data`.
 pub fn table(data: &SessionData) -> Rows {
@@ -45,11 +66,15 @@ pub fn table(data: &SessionData) -> Rows {
     if let Some(s) = &data.score {
         add(
             "Detection rate (truth.csv)",
-            format!(
-                "{:.1} % of {} probe frames",
-                100.0 * s.detect_rate,
-                s.positives
-            ),
+            if s.positives == 0 {
+                format!("{NOT_AVAILABLE} (no probe frames)")
+            } else {
+                format!(
+                    "{} % of {} probe frames",
+                    fixed(100.0 * s.detect_rate, 1),
+                    s.positives
+                )
+            },
         );
         add(
             "False detections (truth.csv)",
@@ -59,16 +84,27 @@ pub fn table(data: &SessionData) -> Rows {
                 s.frames - s.positives
             ),
         );
+        let none_detected = format!("{NOT_AVAILABLE} (no detected probe frames)");
         add(
             "Angle error (truth.csv)",
-            format!(
-                "median {:.4}°, p95 {:.4}°, max {:.4}°",
-                s.angle_err_median_deg, s.angle_err_p95_deg, s.angle_err_max_deg
-            ),
+            if s.angle_err_median_deg.is_finite() {
+                format!(
+                    "median {}°, p95 {}°, max {}°",
+                    fixed(s.angle_err_median_deg, 4),
+                    fixed(s.angle_err_p95_deg, 4),
+                    fixed(s.angle_err_max_deg, 4)
+                )
+            } else {
+                none_detected.clone()
+            },
         );
         add(
             "Apex error (truth.csv)",
-            format!("median {:.2} px", s.tip_err_median_px),
+            if s.tip_err_median_px.is_finite() {
+                format!("median {} px", fixed(s.tip_err_median_px, 2))
+            } else {
+                none_detected
+            },
         );
     }
     force_truth_rows(data, &mut add);
@@ -91,13 +127,15 @@ fn scale_rows(data: &SessionData, add: &mut impl FnMut(&str, String)) {
             format!("{lo:.0}x to {hi:.0}x ({k} frames)"),
         );
     }
-    if let Some((lo, hi, _)) = range(&|r| r.px_per_um) {
+    if let Some((lo, hi, _)) = range(&|r| r.px_per_um.filter(|k| *k > 0.0)) {
         add(
             "Scale (SEM metadata)",
             format!(
-                "{lo:.3} to {hi:.3} px/um ({:.1} to {:.1} nm per pixel)",
-                1e3 / hi,
-                1e3 / lo
+                "{} to {} px/um ({} to {} nm per pixel)",
+                fixed(lo, 3),
+                fixed(hi, 3),
+                fixed(1e3 / hi, 1),
+                fixed(1e3 / lo, 1)
             ),
         );
     }
@@ -120,11 +158,21 @@ fn force_truth_rows(data: &SessionData, add: &mut impl FnMut(&str, String)) {
         .fold(0.0f64, |m, f| m.max(f.abs()));
     let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
     let max = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let relative = if peak > 0.0 {
+        format!(
+            "{} % of the {} nN peak",
+            fixed(100.0 * rms / peak, 2),
+            fixed(peak, 0)
+        )
+    } else {
+        format!("{NOT_AVAILABLE} % of the peak: the true force is 0 throughout")
+    };
     add(
         "Force error (against the true force)",
         format!(
-            "rms {rms:.1} nN ({:.2} % of the {peak:.0} nN peak), max {max:.1} nN, {} frames",
-            100.0 * rms / peak.max(1e-9),
+            "rms {} nN ({relative}), max {} nN, {} frames",
+            fixed(rms, 1),
+            fixed(max, 1),
             errors.len()
         ),
     );
@@ -136,12 +184,17 @@ fn stats_rows(stats: &Value, add: &mut impl FnMut(&str, String)) {
             .try_fold(stats, |v, k| v.get(k))
             .and_then(Value::as_f64)
     };
-    let fmt = |v: Option<f64>, digits: usize| v.map_or("-".into(), |v| format!("{v:.digits$}"));
+    let fmt = |v: Option<f64>, digits: usize| v.map_or("-".into(), |v| fixed(v, digits));
+    let ticks = num(&["haptic_loop", "ticks"]).unwrap_or(0.0);
+    let rate = if ticks >= MIN_TICKS_FOR_RATE {
+        format!("{} Hz", fmt(num(&["haptic_loop", "rate_hz"]), 1))
+    } else {
+        format!("{NOT_AVAILABLE} (a run of fewer than {MIN_TICKS_FOR_RATE} loop periods)")
+    };
     add(
         "Haptic loop",
         format!(
-            "{} Hz; period p50 {} us, p99 {} us, max {} us; {} overruns",
-            fmt(num(&["haptic_loop", "rate_hz"]), 1),
+            "{rate}; period p50 {} us, p99 {} us, max {} us; {} overruns",
             fmt(num(&["haptic_loop", "period_us_p50"]), 1),
             fmt(num(&["haptic_loop", "period_us_p99"]), 1),
             fmt(num(&["haptic_loop", "period_us_max"]), 1),

@@ -6,7 +6,11 @@
 //! (nothing is tracked again). A recorded session shows the thumbnails the daemon drew
 //! during the run (`thumbnails/frame_<seq>.png`, off the real-time threads); a recording
 //! without them has no strip, and the report says so.
-use std::path::Path;
+//!
+//! A frame name from the CSV is only ever a file name inside the frames folder: a name
+//! with `..`, a folder or an absolute path (a CSV edited or written elsewhere) is skipped
+//! with a warning, never followed out of the session.
+use std::path::{Component, Path, PathBuf};
 
 use image::imageops::{self, FilterType};
 use image::{GrayImage, Rgb, RgbImage};
@@ -53,9 +57,15 @@ fn from_frames(
 ) -> (Vec<Thumbnail>, Option<String>) {
     let mut out = Vec::new();
     let mut missing = 0;
+    let mut outside = Vec::new();
     for k in spread(data.rows.len(), max) {
         let row = &data.rows[k];
-        match load_gray(&frames_dir.join(&row.name)) {
+        // Skipped, not followed; the note is printed as a warning by `nanoforce report`.
+        let Some(path) = frame_path(frames_dir, &row.name) else {
+            outside.push(format!("{:?}", row.name));
+            continue;
+        };
+        match load_gray(&path) {
             Ok(frame) => out.push(Thumbnail {
                 image: overlay_thumbnail(&frame, &estimate_of(row)),
                 caption: caption(row, data.timed),
@@ -63,13 +73,32 @@ fn from_frames(
             Err(_) => missing += 1,
         }
     }
-    let note = (missing > 0).then(|| {
-        format!(
-            "{missing} thumbnail frame(s) could not be read from {}",
+    let mut notes = Vec::new();
+    if missing > 0 {
+        notes.push(format!(
+            "{missing} thumbnail frame(s) could not be read from {}.",
             frames_dir.display()
-        )
-    });
-    (out, note)
+        ));
+    }
+    if !outside.is_empty() {
+        notes.push(format!(
+            "{} frame name(s) of the CSV point outside the frames folder and were skipped: {}.",
+            outside.len(),
+            outside.join(", ")
+        ));
+    }
+    (out, (!notes.is_empty()).then(|| notes.join(" ")))
+}
+
+/// `frames_dir/name` when `name` is a plain file name (no `..`, folder, root or prefix).
+pub fn frame_path(frames_dir: &Path, name: &str) -> Option<PathBuf> {
+    let mut components = Path::new(name).components();
+    match (components.next(), components.next()) {
+        (Some(Component::Normal(file)), None) if !name.contains(['/', '\\']) => {
+            Some(frames_dir.join(file))
+        }
+        _ => None,
+    }
 }
 
 /// The estimate a replay CSV row describes, for drawing.

@@ -11,6 +11,7 @@
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
+use super::csv::Table;
 use super::metadata::SemMetadata;
 use crate::vision::{Edge, EdgeFit, Estimate, Miss};
 
@@ -126,9 +127,9 @@ pub fn write_unreadable(out: &mut impl Write, frame: &str, timing: bool) -> io::
     writeln!(out)
 }
 
-/// Quotes a field that holds a comma, quote or newline.
+/// Quotes a field that holds a comma, quote or line break.
 fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
+    if s.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {
         s.to_string()
@@ -176,11 +177,10 @@ pub fn read_results(path: &Path) -> Result<Vec<ResultRow>, ResultsError> {
     })
 }
 
-/// Parses results CSV text.
+/// Parses results CSV text (RFC 4180, see [`super::csv`]).
 pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    let header = split_csv_line(lines.next().ok_or("the file is empty")?);
-    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let table = Table::parse(text)?;
+    let col = |name: &str| table.column(name);
     let (Some(frame), Some(detected)) = (col("frame"), col("detected")) else {
         return Err("no `frame` and `detected` columns".into());
     };
@@ -194,22 +194,22 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
         "magnification",
         "processing_ms",
     ];
-    let cols = names.map(col);
+    let [angle, force, tx, ty, conf, ppu, mag, ms] = names.map(col);
     let edge_cols: Vec<[Option<usize>; 4]> = Edge::ALL
         .iter()
         .map(|e| ["x0", "y0", "x1", "y1"].map(|k| col(&format!("{}_{k}", e.name()))))
         .collect();
     let miss = col("miss");
     let mut rows = Vec::new();
-    for (k, line) in lines.enumerate() {
-        let cells = split_csv_line(line);
-        let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
-        let num = |i: Option<usize>| cell(i).parse::<f64>().ok().filter(|v| v.is_finite());
-        let flag = cell(Some(detected));
+    for record in &table.rows {
+        let num = |i: Option<usize>| record.number(i);
+        let flag = record.cell(Some(detected));
         if !matches!(flag, "0" | "1" | "true" | "false") {
-            return Err(format!("row {}: detected is {flag:?}, not 1/0", k + 2));
+            return Err(format!(
+                "row {}: detected is {flag:?}, not 1/0",
+                record.line
+            ));
         }
-        let [angle, force, tx, ty, conf, ppu, mag, ms] = cols;
         let mut edges = [None; 3];
         for (slot, c) in edges.iter_mut().zip(&edge_cols) {
             if let [Some(x0), Some(y0), Some(x1), Some(y1)] = c.map(num) {
@@ -217,7 +217,7 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
             }
         }
         rows.push(ResultRow {
-            frame: cell(Some(frame)).to_string(),
+            frame: record.cell(Some(frame)).to_string(),
             detected: matches!(flag, "1" | "true"),
             angle_deg: num(angle),
             force_nn: num(force),
@@ -226,32 +226,11 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
             px_per_um: num(ppu),
             magnification: num(mag),
             edges,
-            miss: cell(miss).to_string(),
+            miss: record.cell(miss).to_string(),
             processing_ms: num(ms),
         });
     }
     Ok(rows)
-}
-
-/// The fields of one CSV line (RFC 4180 quoting, no embedded newlines).
-pub fn split_csv_line(line: &str) -> Vec<String> {
-    let mut fields = Vec::new();
-    let mut field = String::new();
-    let mut quoted = false;
-    let mut chars = line.chars().peekable();
-    while let Some(c) = chars.next() {
-        match (c, quoted) {
-            ('"', true) if chars.peek() == Some(&'"') => {
-                field.push('"');
-                chars.next();
-            }
-            ('"', _) => quoted = !quoted,
-            (',', false) => fields.push(std::mem::take(&mut field)),
-            _ => field.push(c),
-        }
-    }
-    fields.push(field);
-    fields
 }
 
 #[cfg(test)]
@@ -287,7 +266,8 @@ mod tests {
         assert!(line.ends_with(",unreadable,\n"), "{line}");
         let columns = header(true).split(',').count();
         assert_eq!(columns, 31);
-        assert_eq!(split_csv_line(line.trim_end()).len(), columns);
+        let cells = &super::super::csv::records(&line).unwrap()[0].cells;
+        assert_eq!(cells.len(), columns);
         let rows = parse_results(&format!("{}\n{line}", header(true))).unwrap();
         assert_eq!(rows[0].frame, "a,b.png");
         assert!(!rows[0].detected && rows[0].tip_px.is_none());

@@ -6,7 +6,8 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use super::results::{split_csv_line, ResultRow, ResultsError};
+use super::csv::Table;
+use super::results::{ResultRow, ResultsError};
 
 /// One row of a `truth.csv` (scene.md's columns).
 #[derive(Debug, Clone, PartialEq)]
@@ -32,9 +33,8 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, ResultsError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    let header = split_csv_line(lines.next().ok_or_else(|| format("empty".into()))?);
-    let col = |name: &str| header.iter().position(|h| h.trim() == name);
+    let table = Table::parse(&text).map_err(format)?;
+    let col = |name: &str| table.column(name);
     let names = [
         "frame",
         "detected",
@@ -48,20 +48,20 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, ResultsError> {
         return Err(format(format!("truth.csv needs the columns {names:?}")));
     };
     let (mag, ppu, t) = (col("magnification"), col("px_per_um"), col("t_s"));
-    Ok(lines
-        .map(|line| {
-            let cells = split_csv_line(line);
-            let cell = |i: Option<usize>| i.and_then(|i| cells.get(i)).map_or("", |c| c.trim());
-            let num = |i: Option<usize>| cell(i).parse::<f64>().unwrap_or(f64::NAN);
+    Ok(table
+        .rows
+        .iter()
+        .map(|record| {
+            let num = |i: Option<usize>| record.number(i).unwrap_or(f64::NAN);
             TruthRow {
-                frame: cell(Some(frame)).to_string(),
-                detected: cell(Some(det)) == "1",
+                frame: record.cell(Some(frame)).to_string(),
+                detected: record.cell(Some(det)) == "1",
                 angle_deg: num(Some(angle)),
                 force_nn: num(Some(force)),
                 tip_px: [num(Some(tx)), num(Some(ty))],
                 magnification: num(mag),
                 px_per_um: num(ppu),
-                t_s: Some(num(t)).filter(|v| v.is_finite()),
+                t_s: record.number(t),
             }
         })
         .collect())

@@ -339,3 +339,19 @@ pub fn base64_decode(text: &str) -> Vec<u8> {
     }
     out
 }
+
+/// Sends `request` as is on a new loopback connection and reads the answer until the
+/// server closes or `timeout` passes: (response head, body).
+pub fn http_raw(port: u16, request: &str, timeout: Duration) -> (String, Vec<u8>) {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.set_read_timeout(Some(timeout)).unwrap();
+    s.write_all(request.as_bytes()).unwrap();
+    let mut all = Vec::new();
+    let _ = s.read_to_end(&mut all);
+    let split = all
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .map_or(all.len(), |p| p + 4);
+    let head = String::from_utf8_lossy(&all[..split]).to_string();
+    (head, all[split..].to_vec())
+}
