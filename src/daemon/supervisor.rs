@@ -650,7 +650,7 @@ async fn supervise(
         ExitReason::Signal(name) if !matches!(*name, "SIGINT" | "SIGTERM") => {
             tracing::warn!("{name}: stopping with outputs at zero")
         }
-        _ => tracing::info!("stopping ({})", exit.describe()),
+        _ => tracing::info!("stopping ({exit:?})"),
     }
     health.finish_status_line(options.status_line);
     let duration_s = started.elapsed().as_secs_f64();
