@@ -426,7 +426,7 @@ fn the_recordings_budget_deletes_the_oldest_sessions() {
     assert_eq!(left.len(), 3, "{left:?}");
     for name in &old[..3] {
         assert!(
-            err.contains(&format!("deleted the oldest session")) && err.contains(name),
+            err.contains("deleted the oldest session") && err.contains(name),
             "{err}"
         );
     }

@@ -218,8 +218,13 @@ struct Threads {
 impl Drop for Threads {
     fn drop(&mut self) {
         if self.haptic.is_some() {
-            tracing::error!("the supervisor thread panicked: stopping with outputs at zero");
-            self.shut_down("panic in the supervisor thread");
+            let reason = if thread::panicking() {
+                "panic in the supervisor thread"
+            } else {
+                "the supervisor ended early"
+            };
+            tracing::error!("{reason}: stopping with outputs at zero");
+            self.shut_down(reason);
         }
     }
 }
