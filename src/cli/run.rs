@@ -32,7 +32,8 @@ config file (an invalid file is rejected and the old gains kept; other changed s
 are named as needing a restart).\n\n\
 One run per state directory and device: a second is refused, naming the first one's \
 pid. Exit status: 0 a clean stop, 1 refused to start, 70 a thread panicked, 74 the \
-recording failed (a full disk) while control went on. Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
+recording failed (a full disk) while control went on, 128 + n a stop signal n.\n\n\
+Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
 Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.toml, \
 stats.json) in a session folder under the state directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
