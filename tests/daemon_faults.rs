@@ -438,6 +438,66 @@ fn haptic_loop_panic_zeroes_outputs_while_unwinding() {
     assert!(!lab.forces_on());
 }
 
+/// A panic injected into each thread of a running daemon (engaged, the stage moving):
+/// the run stops, the stage is at zero and forces are off on the devices themselves, and
+/// the stop is recorded with the thread named.
+#[test]
+fn a_panic_in_any_thread_stops_with_outputs_at_zero() {
+    use nanoforce::daemon::inject::{PanicInjection, THREADS};
+    for thread in THREADS {
+        let lab = Arc::new(Lab::default());
+        *lab.estimate.lock().unwrap() = detected(500.0);
+        let session = tempfile::tempdir().unwrap();
+        let clock = Clock::start();
+        let devices = Devices {
+            frames: Box::new(Frames {
+                lab: lab.clone(),
+                clock,
+                period: Duration::from_millis(10),
+                sequence: 0,
+            }),
+            estimator: Box::new(Tracker(lab.clone())),
+            stage: Box::new(Stage(lab.clone())),
+            haptic: Box::new(Haptic(lab.clone())),
+        };
+        let options = RunOptions {
+            clock,
+            loop_options: LoopOptions {
+                rt_priority: None,
+                lock_memory: false,
+                cpu_latency_us: None,
+                ..LoopOptions::default()
+            },
+            session_dir: Some(session.path().to_path_buf()),
+            // Recording thumbnails runs the monitor thread.
+            monitor: Some(nanoforce::monitor::MonitorConfig::default()),
+            inject: Some(PanicInjection::new(thread, Duration::from_millis(400)).unwrap()),
+            ..RunOptions::default()
+        };
+        let handle = Daemon::start(gains(), devices, options).unwrap();
+        wait_for_state(&handle, SafetyState::Engaged);
+        lab.set_position(Vector3::new(10.0, 0.0, 0.0));
+        sleep_ms(50);
+        assert!(
+            lab.last_velocity().x > 0.0,
+            "{thread}: moving before the panic"
+        );
+        let outcome = handle.wait().unwrap();
+        assert_eq!(outcome.exit, ExitReason::ThreadFailed(thread.into()));
+        assert!(lab.stage_zeroed.load(Ordering::SeqCst) >= 1, "{thread}");
+        assert_eq!(lab.last_velocity(), Vector3::zeros(), "{thread}");
+        assert!(!lab.forces_on(), "{thread}");
+        let reason = format!("panic in the {thread} thread");
+        assert_eq!(outcome.stats.stop.reason, reason);
+        assert!(outcome.stats.stop.outputs_zeroed);
+        let events = std::fs::read_to_string(session.path().join("events.log")).unwrap();
+        assert!(
+            events.contains(&format!("stop: {reason}")) && events.contains("outputs at zero"),
+            "{thread}: {events}"
+        );
+    }
+}
+
 #[test]
 fn normal_stop_leaves_outputs_at_zero_and_forces_off() {
     let lab = Arc::new(Lab::default());

@@ -10,8 +10,10 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::config::{Config, Number};
+use crate::daemon::inject::PanicInjection;
+use crate::daemon::instance::{self, InstanceLock};
 use crate::daemon::notify::Notifier;
-use crate::daemon::{lab, telemetry, Daemon, ExitReason, RunOptions};
+use crate::daemon::{lab, telemetry, Daemon, ExitReason, Reload, RunOptions};
 use crate::hw::Clock;
 
 /// The built-in simulated lab.
@@ -30,9 +32,15 @@ Threads: frames (the SEM source) -> tracker (tip angle and force) -> the 1 kHz h
 loop, which reads the stylus, renders the scaled force on top of centring springs and \
 sends the S100 its rate command. Without --config the built-in simulated lab runs \
 (simulated S100, sample, SEM and operator; see config/sim.toml).\n\n\
-Signals: SIGINT or SIGTERM stop cleanly with the outputs at zero; SIGHUP reloads the \
-[teleop] and [safety] gains from the config file (an invalid file is rejected and the \
-old gains kept). Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
+Signals: SIGINT or SIGTERM stop cleanly with the outputs at zero; SIGQUIT, SIGABRT \
+(systemd's watchdog), SIGUSR1, SIGUSR2, SIGALRM and SIGXCPU stop the same way and exit \
+with 128 + the signal's number. SIGHUP reloads the [teleop] and [safety] gains from the \
+config file (an invalid file is rejected and the old gains kept; other changed sections \
+are named as needing a restart).\n\n\
+One run per state directory and device: a second is refused, naming the first one's \
+pid. Exit status: 0 a clean stop, 1 refused to start, 70 a thread panicked, 74 the \
+recording failed (a full disk) while control went on, 128 + n a stop signal n.\n\n\
+Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
 Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.toml, \
 stats.json) in a session folder under the state directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
@@ -66,6 +74,18 @@ pub struct RunArgs {
     pub quiet: bool,
 }
 
+/// Exit statuses besides 0 (a clean stop) and 1 (refused to start: an invalid
+/// configuration, a device that would not open, another run holding the devices).
+pub mod exit_status {
+    /// A thread of the daemon panicked (outputs were zeroed).
+    pub const THREAD_FAILED: u8 = 70;
+    /// The run went on but its recording did not (a full disk, a write error, the budget)
+    /// or a stats file could not be written.
+    pub const RECORDING_FAILED: u8 = 74;
+    /// A stop signal other than SIGINT/SIGTERM ended the run: 128 + its number.
+    pub const SIGNAL_BASE: u8 = 128;
+}
+
 pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     // The configuration is validated completely before any device is opened.
     let (config, text) = load(args.config.as_deref())?;
@@ -80,36 +100,62 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         .as_deref()
         .map(StatsFile::open)
         .transpose()?;
-    let clock = Clock::start();
-    let devices = lab::open(&config, clock).context("opening the lab's devices")?;
-    let session_dir = if args.no_record {
-        None
-    } else {
-        let state_dir = args
-            .state_dir
+    let inject = PanicInjection::from_env().map_err(anyhow::Error::msg)?;
+    let state_dir = (!args.no_record).then(|| {
+        args.state_dir
+            .clone()
             .or_else(|| {
                 std::env::var_os("STATE_DIRECTORY")
                     .is_none()
                     .then(|| config.daemon.state_dir.clone())
                     .flatten()
             })
-            .unwrap_or_else(telemetry::default_state_dir);
-        let dir = telemetry::create_session_dir(&state_dir)
-            .with_context(|| format!("creating a session folder under {}", state_dir.display()))?;
-        std::fs::write(dir.join("config.toml"), &text)
-            .with_context(|| format!("writing {}", dir.join("config.toml").display()))?;
-        tracing::info!("recording this session in {}", dir.display());
-        Some(dir)
+            .unwrap_or_else(telemetry::default_state_dir)
+    });
+    // One daemon per state directory and per device, before anything is opened.
+    if let Some(dir) = &state_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let _lock = InstanceLock::acquire(&instance::targets(state_dir.as_deref(), &config.devices))?;
+    let budget = state_dir.as_ref().map(|dir| telemetry::Budget {
+        sessions_dir: dir.join("sessions"),
+        max_bytes: config.daemon.recordings_max_mb * 1024 * 1024,
+    });
+    if let Some(budget) = &budget {
+        telemetry::prune_sessions(budget, None);
+    }
+    let clock = Clock::start();
+    let devices = lab::open(&config, clock).context("opening the lab's devices")?;
+    let (session_dir, recording_error) = match &state_dir {
+        None => (None, None),
+        Some(state_dir) => match new_session(state_dir, &text) {
+            Ok(dir) => {
+                tracing::info!("recording this session in {}", dir.display());
+                (Some(dir), None)
+            }
+            // A full disk does not stop the lab: the run goes on unrecorded, and says so.
+            Err(e) => {
+                let reason = format!("{e:#}");
+                tracing::warn!("not recording: {reason}");
+                (None, Some(reason))
+            }
+        },
     };
     let reload_path = args.config.clone();
+    let running = config.clone();
     let options = RunOptions {
         duration,
         session_dir: session_dir.clone(),
         status_line: !args.quiet,
         handle_signals: true,
         reload: reload_path.map(|path| {
-            Box::new(move || Ok(Config::load(&path)?.teleop))
-                as Box<dyn Fn() -> anyhow::Result<_> + Send>
+            Box::new(move || {
+                let new = Config::load(&path)?;
+                Ok(Reload {
+                    needs_restart: restart_sections(&running, &new),
+                    gains: new.teleop,
+                })
+            }) as Box<dyn Fn() -> anyhow::Result<Reload> + Send>
         }),
         loop_options: config.daemon.loop_options.clone(),
         notifier: Notifier::from_env().context("connecting to systemd's NOTIFY_SOCKET")?,
@@ -117,22 +163,48 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         clock,
         monitor: Some(config.monitor.clone()),
         pixel_origin: config.tracker.pixel_origin,
+        recordings_budget: budget,
+        recording_error,
+        inject,
     };
     let handle = Daemon::start(config.teleop.clone(), devices, options)?;
     let outcome = handle.wait()?;
     let json = serde_json::to_string_pretty(&outcome.stats)?;
+    let mut write_failed = false;
     if let Some(dir) = &session_dir {
-        std::fs::write(dir.join("stats.json"), &json)
-            .with_context(|| format!("writing {}", dir.join("stats.json").display()))?;
+        let path = dir.join("stats.json");
+        if let Err(e) = std::fs::write(&path, &json) {
+            tracing::warn!("writing {}: {e}", path.display());
+            write_failed = true;
+        }
     }
     if let Some(file) = stats_json {
-        file.write(&json)?;
+        if let Err(e) = file.write(&json) {
+            tracing::error!("{e:#}");
+            write_failed = true;
+        }
     }
     summarise(&outcome.stats);
+    let recording_failed = outcome.stats.recording.state == "stopped";
     Ok(match outcome.exit {
         ExitReason::ThreadFailed(name) => {
             tracing::error!("the {name} thread failed; outputs were set to zero");
-            ExitCode::FAILURE
+            ExitCode::from(exit_status::THREAD_FAILED)
+        }
+        ExitReason::Signal(name) if !matches!(name, "SIGINT" | "SIGTERM") => {
+            let number = outcome.exit.signal_number().unwrap_or(0);
+            tracing::warn!("stopped by {name}; outputs were set to zero");
+            ExitCode::from(exit_status::SIGNAL_BASE + number as u8)
+        }
+        _ if recording_failed || write_failed => {
+            let what = outcome
+                .stats
+                .recording
+                .error
+                .as_deref()
+                .unwrap_or("a stats file could not be written");
+            tracing::error!("the run went on but its recording failed: {what}");
+            ExitCode::from(exit_status::RECORDING_FAILED)
         }
         _ => ExitCode::SUCCESS,
     })
@@ -212,6 +284,34 @@ impl Drop for StatsFile {
     }
 }
 
+/// A new session folder holding the configuration the run uses.
+fn new_session(state_dir: &Path, text: &str) -> anyhow::Result<PathBuf> {
+    let dir = telemetry::create_session_dir(state_dir)
+        .with_context(|| format!("creating a session folder under {}", state_dir.display()))?;
+    let path = dir.join("config.toml");
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    Ok(dir)
+}
+
+/// The sections SIGHUP cannot apply that differ between the running and the new file.
+fn restart_sections(running: &Config, new: &Config) -> Vec<&'static str> {
+    let mut changed = Vec::new();
+    let mut check = |name, same: bool| {
+        if !same {
+            changed.push(name);
+        }
+    };
+    check("cantilever", running.cantilever == new.cantilever);
+    check("tracker", running.tracker == new.tracker);
+    check("frames", running.devices.frames == new.devices.frames);
+    check("daq", running.devices.daq == new.devices.daq);
+    check("haptic", running.devices.haptic == new.devices.haptic);
+    check("daemon", running.daemon == new.daemon);
+    check("monitor", running.monitor == new.monitor);
+    check("sim", running.sim == new.sim);
+    changed
+}
+
 /// The configuration and its text (recorded with the session).
 fn load(path: Option<&Path>) -> anyhow::Result<(Config, String)> {
     match path {
@@ -273,7 +373,6 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
         );
     }
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,14 +16,32 @@ pub(crate) struct RawDaemon {
     cpu_latency_us: Option<i64>,
     telemetry_every: Option<i64>,
     state_dir: Option<String>,
+    recordings_max_mb: Option<i64>,
 }
 
 /// Validated `[daemon]`.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DaemonConfig {
     pub loop_options: LoopOptions,
     /// Where sessions are recorded; None: `$STATE_DIRECTORY` or the user's state dir.
     pub state_dir: Option<PathBuf>,
+    /// The session folders together stay below this many MiB: the oldest are deleted.
+    pub recordings_max_mb: u64,
+}
+
+/// `daemon.recordings_max_mb` when not set.
+pub const DEFAULT_RECORDINGS_MAX_MB: u64 = 2048;
+/// Its accepted range, MiB (1 MiB .. 1 TiB).
+pub const RECORDINGS_MAX_MB_RANGE: std::ops::RangeInclusive<i64> = 1..=1_048_576;
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        DaemonConfig {
+            loop_options: LoopOptions::default(),
+            state_dir: None,
+            recordings_max_mb: DEFAULT_RECORDINGS_MAX_MB,
+        }
+    }
 }
 
 impl DaemonConfig {
@@ -75,7 +93,19 @@ impl DaemonConfig {
             }
             other => other.map(PathBuf::from),
         };
+        let recordings_max_mb = match raw.recordings_max_mb {
+            None => DEFAULT_RECORDINGS_MAX_MB,
+            Some(mb) if RECORDINGS_MAX_MB_RANGE.contains(&mb) => mb as u64,
+            Some(mb) => {
+                return Err(check.invalid(
+                    "daemon.recordings_max_mb",
+                    mb,
+                    "must be in [1, 1048576] MiB",
+                ))
+            }
+        };
         Ok(DaemonConfig {
+            recordings_max_mb,
             loop_options: LoopOptions {
                 rt_priority,
                 lock_memory: raw.lock_memory.unwrap_or(d.lock_memory),
@@ -117,6 +147,14 @@ mod tests {
         assert_eq!(options.spin_us, 0);
         let options = load("cpu_latency_us = 20").unwrap().daemon.loop_options;
         assert_eq!(options.cpu_latency_us, Some(20));
+        assert_eq!(load("").unwrap().daemon.recordings_max_mb, 2048);
+        assert_eq!(
+            load("recordings_max_mb = 5")
+                .unwrap()
+                .daemon
+                .recordings_max_mb,
+            5
+        );
     }
 
     #[test]
@@ -126,6 +164,12 @@ mod tests {
             ("cpu_latency_us = -2", "daemon.cpu_latency_us", "-2"),
             ("spin_us = 501", "daemon.spin_us", "501"),
             ("telemetry_every = 0", "daemon.telemetry_every", "0"),
+            ("recordings_max_mb = 0", "daemon.recordings_max_mb", "0"),
+            (
+                "recordings_max_mb = 1048577",
+                "daemon.recordings_max_mb",
+                "1048577",
+            ),
         ] {
             let err = load(line).unwrap_err();
             assert!(

@@ -7,14 +7,22 @@
 //! - `telemetry`: drains the loops' records into the session folder;
 //! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
 //!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
-//! - the supervisor, on a small tokio runtime: signals (SIGINT/SIGTERM stop, SIGHUP
-//!   reloads the gains), systemd notifications and watchdog, the status line.
+//! - the supervisor, on a small tokio runtime: signals (SIGHUP reloads the gains;
+//!   SIGINT, SIGTERM, SIGQUIT, SIGABRT, SIGUSR1/2, SIGALRM, SIGXCPU stop it), systemd
+//!   notifications and watchdog, the status line. Any thread that dies (a panic, in
+//!   any of them) stops the run: the haptic loop first, so the outputs are at zero and
+//!   forces off before the stop is recorded.
+//!
+//! [`instance`] keeps one daemon per state directory and device set; [`inject`] lets
+//! the tests panic any thread.
 //!
 //! The blocking loops are plain threads rather than async tasks: a capture call, a
 //! tracker pass or a 1 kHz deadline must never wait on an executor, and async is only
 //! the wiring around them.
 pub mod config;
 pub mod haptic_loop;
+pub mod inject;
+pub mod instance;
 pub mod lab;
 pub mod notify;
 pub mod pipeline;
@@ -27,7 +35,9 @@ pub mod telemetry;
 
 pub use haptic_loop::LoopOptions;
 pub use pipeline::Estimator;
-pub use supervisor::{Daemon, DaemonHandle, Devices, ExitReason, Outcome, RunOptions};
+pub use supervisor::{
+    Daemon, DaemonHandle, Devices, ExitReason, Outcome, Reload, RunOptions, STOP_SIGNALS,
+};
 
 use crate::control::SensedForce;
 use crate::hw::frames::FrameMeta;

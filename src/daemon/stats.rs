@@ -104,6 +104,29 @@ pub struct RunStats {
     pub safety: SafetyStats,
     /// Resident memory of the process (an addition to the daemon issue's schema).
     pub memory: MemoryStats,
+    /// How the run ended.
+    pub stop: StopStats,
+    /// Whether the session folder holds the whole run.
+    pub recording: RecordingStats,
+}
+
+/// How the run ended.
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
+pub struct StopStats {
+    /// "duration", "SIGTERM", "SIGABRT", ..., "requested", "frames ended",
+    /// "panic in the tracker thread".
+    pub reason: String,
+    /// The haptic loop ended, so its outputs were zeroed and forces switched off (false
+    /// only when the loop did not end within its deadline).
+    pub outputs_zeroed: bool,
+}
+
+/// The session recording.
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
+pub struct RecordingStats {
+    /// "off" (`--no-record`), "recording" (complete), "stopped" (see `error`).
+    pub state: String,
+    pub error: Option<String>,
 }
 
 /// Resident set size, sampled once a second by the supervisor.
@@ -267,6 +290,14 @@ mod tests {
                 gate_attenuated: 0,
             },
             memory: MemoryStats::default(),
+            stop: StopStats {
+                reason: "SIGABRT".into(),
+                outputs_zeroed: true,
+            },
+            recording: RecordingStats {
+                state: "stopped".into(),
+                error: Some("No space left on device".into()),
+            },
         };
         let json = serde_json::to_value(&stats).unwrap();
         assert_eq!(json["haptic_loop"]["period_us_p99"], 1010.5);
@@ -274,6 +305,8 @@ mod tests {
         assert_eq!(json["frames"]["dropped"], 0);
         assert_eq!(json["safety"]["gate_held"], 2);
         assert_eq!(json["safety"]["gate_attenuated"], 0);
+        assert_eq!(json["stop"]["reason"], "SIGABRT");
+        assert_eq!(json["recording"]["state"], "stopped");
     }
 
     #[test]

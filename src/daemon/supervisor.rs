@@ -2,7 +2,7 @@
 //! and on the way out makes sure the outputs are at zero before it reports.
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
@@ -11,14 +11,16 @@ use anyhow::Context;
 use tokio::sync::mpsc as async_mpsc;
 
 use super::haptic_loop::{GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
+use super::inject::{PanicInjection, PanickingEstimator, PanickingFrames, PanickingHaptic};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
 use super::snapshot::snapshot_channel;
 use super::stats::{
-    ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RunStats, SafetyStats,
+    ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RecordingStats, RunStats,
+    SafetyStats, StopStats,
 };
 use super::supervisor_health::Health;
-use super::telemetry::{self, Recorder};
+use super::telemetry::{self, Budget, Recorder, RecordingStatus};
 use super::PublishedEstimate;
 use crate::config::PixelOrigin;
 use crate::control::{SafetyState, TeleopGains};
@@ -47,7 +49,7 @@ pub struct RunOptions {
     /// Handle SIGINT/SIGTERM (stop) and SIGHUP (reload gains through `reload`).
     pub handle_signals: bool,
     /// Reads and validates new gains for SIGHUP; an error keeps the old gains.
-    pub reload: Option<Box<dyn Fn() -> anyhow::Result<TeleopGains> + Send>>,
+    pub reload: Option<Box<dyn Fn() -> anyhow::Result<Reload> + Send>>,
     pub loop_options: LoopOptions,
     pub notifier: Notifier,
     /// Stop when the frame source ends (a finite recording).
@@ -58,6 +60,21 @@ pub struct RunOptions {
     pub monitor: Option<MonitorConfig>,
     /// `tracker.pixel_origin`: where the recorded apex columns count from.
     pub pixel_origin: PixelOrigin,
+    /// `[daemon] recordings_max_mb`: the running session keeps the recordings below it.
+    pub recordings_budget: Option<Budget>,
+    /// Why there is no session folder although one was asked for (a full disk at start).
+    pub recording_error: Option<String>,
+    /// A panic to inject (tests only; None in every normal run).
+    pub inject: Option<PanicInjection>,
+}
+
+/// What SIGHUP read from the configuration file.
+pub struct Reload {
+    /// `[teleop]` and `[safety]`, handed to the haptic loop.
+    pub gains: TeleopGains,
+    /// Sections that changed but are only read at start (`"cantilever"`, `"tracker"`,
+    /// ...): the run goes on with their old values and says they need a restart.
+    pub needs_restart: Vec<&'static str>,
 }
 
 impl Default for RunOptions {
@@ -74,6 +91,9 @@ impl Default for RunOptions {
             clock: Clock::start(),
             monitor: None,
             pixel_origin: PixelOrigin::Centre,
+            recordings_budget: None,
+            recording_error: None,
+            inject: None,
         }
     }
 }
@@ -82,12 +102,51 @@ impl Default for RunOptions {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ExitReason {
     Duration,
+    /// A stop signal, by name ("SIGTERM", "SIGABRT", ...).
     Signal(&'static str),
     Requested,
     FramesEnded,
-    /// A loop thread died (panicked): the outputs were zeroed, the run is a failure.
+    /// A thread died (panicked): the outputs were zeroed, the run is a failure.
     ThreadFailed(String),
 }
+
+impl ExitReason {
+    /// As `stats.json` and `events.log` say it.
+    pub fn describe(&self) -> String {
+        match self {
+            ExitReason::Duration => "duration".into(),
+            ExitReason::Signal(name) => (*name).into(),
+            ExitReason::Requested => "requested".into(),
+            ExitReason::FramesEnded => "frames ended".into(),
+            ExitReason::ThreadFailed(name) => format!("panic in the {name} thread"),
+        }
+    }
+
+    /// The number of a stop signal (SIGABRT: 6), for the exit status 128 + n.
+    pub fn signal_number(&self) -> Option<i32> {
+        match self {
+            ExitReason::Signal(name) => STOP_SIGNALS
+                .iter()
+                .find(|(_, n)| n == name)
+                .map(|(number, _)| *number),
+            _ => None,
+        }
+    }
+}
+
+/// The signals that stop the daemon (outputs to zero, the stop recorded, then exit).
+/// SIGINT and SIGTERM are the normal stop; the others mean something went wrong
+/// (SIGABRT: systemd's watchdog; SIGXCPU: a CPU-time limit) and end with 128 + n.
+pub const STOP_SIGNALS: [(i32, &str); 8] = [
+    (libc::SIGINT, "SIGINT"),
+    (libc::SIGTERM, "SIGTERM"),
+    (libc::SIGQUIT, "SIGQUIT"),
+    (libc::SIGABRT, "SIGABRT"),
+    (libc::SIGUSR1, "SIGUSR1"),
+    (libc::SIGUSR2, "SIGUSR2"),
+    (libc::SIGALRM, "SIGALRM"),
+    (libc::SIGXCPU, "SIGXCPU"),
+];
 
 #[derive(Debug, Clone)]
 pub struct Outcome {
@@ -109,6 +168,8 @@ pub struct DaemonHandle {
     pub pipeline_shared: Arc<PipelineShared>,
     /// Where the monitor page is served, when it is.
     pub monitor_addr: Option<SocketAddr>,
+    /// Whether the session is being recorded.
+    pub recording: Arc<RecordingStatus>,
 }
 
 impl DaemonHandle {
@@ -136,17 +197,157 @@ pub struct Daemon;
 const TICK_RING: usize = 8192;
 const ESTIMATE_RING: usize = 1024;
 
+/// The running threads. Each handle is taken when the thread is stopped; dropping
+/// `Threads` with the haptic loop still in it (the supervisor itself panicked) stops
+/// everything the same way, outputs first.
 struct Threads {
-    frames: JoinHandle<()>,
-    tracker: JoinHandle<TrackerReport>,
-    haptic: JoinHandle<LoopReport>,
-    recorder: Option<(
-        JoinHandle<std::io::Result<()>>,
-        Arc<std::sync::atomic::AtomicBool>,
-    )>,
+    frames: Option<JoinHandle<()>>,
+    tracker: Option<JoinHandle<TrackerReport>>,
+    haptic: Option<JoinHandle<LoopReport>>,
+    recorder: Option<(JoinHandle<std::io::Result<()>>, Arc<AtomicBool>)>,
     events: mpsc::Sender<String>,
     gains: rtrb::Producer<TeleopGains>,
     monitor: Option<MonitorHandle>,
+    loop_shared: Arc<LoopShared>,
+    pipeline_shared: Arc<PipelineShared>,
+    /// Set once the haptic loop has ended (its outputs zeroed, forces off).
+    outputs_zeroed: Arc<AtomicBool>,
+    session_dir: Option<PathBuf>,
+}
+
+impl Drop for Threads {
+    fn drop(&mut self) {
+        if self.haptic.is_some() {
+            let reason = if thread::panicking() {
+                "panic in the supervisor thread"
+            } else {
+                "the supervisor ended early"
+            };
+            tracing::error!("{reason}: stopping with outputs at zero");
+            self.shut_down(reason);
+        }
+    }
+}
+
+/// How long the stop waits for each loop to end.
+const JOIN_LIMIT: Duration = Duration::from_secs(1);
+
+/// Joins `handle` if its thread ends within `limit`; None when it did not (it is left
+/// running: the process exit ends it). Err holds a panic's message.
+fn join_within<T>(handle: JoinHandle<T>, limit: Duration) -> Option<Result<T, String>> {
+    let deadline = Instant::now() + limit;
+    while !handle.is_finished() && Instant::now() < deadline {
+        thread::sleep(Duration::from_millis(2));
+    }
+    if !handle.is_finished() {
+        return None;
+    }
+    Some(
+        handle
+            .join()
+            .map_err(|payload| panic_message(payload.as_ref())),
+    )
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "non-text panic".into())
+}
+
+impl Threads {
+    /// Stops every thread: the haptic loop first (its outputs are zeroed as it ends or
+    /// unwinds), then the stop goes into events.log, then the rest; the recorder last so
+    /// it writes everything. Each wait is bounded.
+    fn shut_down(&mut self, reason: &str) -> (Option<LoopReport>, Option<TrackerReport>) {
+        self.loop_shared.stop.store(true, Ordering::Relaxed);
+        let mut panics = Vec::new();
+        let loop_report = match self.haptic.take().map(|h| join_within(h, JOIN_LIMIT)) {
+            Some(Some(Ok(report))) => Some(report),
+            Some(Some(Err(message))) => {
+                panics.push(format!("haptic-loop: {message}"));
+                None
+            }
+            _ => None,
+        };
+        let zeroed = loop_ended(&loop_report, &panics);
+        self.outputs_zeroed.store(zeroed, Ordering::Relaxed);
+        self.pipeline_shared.stop.store(true, Ordering::Relaxed);
+        let tracker_report = match self.tracker.take().map(|t| {
+            t.thread().unpark();
+            join_within(t, JOIN_LIMIT)
+        }) {
+            Some(Some(Ok(report))) => Some(report),
+            Some(Some(Err(message))) => {
+                panics.push(format!("tracker: {message}"));
+                None
+            }
+            _ => None,
+        };
+        let outputs = if zeroed {
+            "outputs at zero, forces off"
+        } else {
+            tracing::error!(
+                "the haptic loop did not end within {JOIN_LIMIT:?}: outputs not confirmed at zero"
+            );
+            "the haptic loop did not end: outputs NOT confirmed at zero"
+        };
+        let detail = if panics.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", panics.join("; "))
+        };
+        let stop_line = format!("stop: {reason}{detail}; {outputs}");
+        let recorder_alive = self
+            .recorder
+            .as_ref()
+            .is_some_and(|(h, _)| !h.is_finished());
+        if recorder_alive {
+            let _ = self.events.send(stop_line);
+        } else if let Some(dir) = &self.session_dir {
+            // The writer thread is gone (it panicked): the stop goes in directly.
+            append_line(&dir.join("events.log"), &stop_line);
+        }
+        if let Some(monitor) = self.monitor.take() {
+            monitor.stop();
+        }
+        // A frame source may be blocked in a read (a pipe): give it a moment, then leave it.
+        if let Some(frames) = self.frames.take() {
+            if join_within(frames, JOIN_LIMIT).is_none() {
+                tracing::warn!("frame source still blocked in a read; not waiting for it");
+            }
+        }
+        if let Some((handle, stop)) = self.recorder.take() {
+            stop.store(true, Ordering::Relaxed);
+            match join_within(handle, JOIN_LIMIT * 2) {
+                Some(Ok(Ok(()))) => {}
+                Some(Ok(Err(e))) => tracing::error!("telemetry recording failed: {e}"),
+                Some(Err(message)) => tracing::error!("telemetry thread panicked: {message}"),
+                None => tracing::error!("the telemetry thread did not end; files may be short"),
+            }
+        }
+        (loop_report, tracker_report)
+    }
+}
+
+fn append_line(path: &std::path::Path, line: &str) {
+    use std::io::Write;
+    let appended = std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .and_then(|mut f| writeln!(f, "{line}"));
+    if let Err(e) = appended {
+        tracing::error!("writing {}: {e}", path.display());
+    }
+}
+
+/// The haptic loop's thread ended (normally or by a panic): either way its outputs were
+/// zeroed by `Outputs`' drop.
+fn loop_ended(report: &Option<LoopReport>, panics: &[String]) -> bool {
+    report.is_some() || panics.iter().any(|p| p.starts_with("haptic-loop"))
 }
 
 impl Daemon {
@@ -161,6 +362,15 @@ impl Daemon {
         let loop_shared = Arc::new(LoopShared::default());
         let pipeline_shared = Arc::new(PipelineShared::default());
         let (commands, commands_rx) = async_mpsc::unbounded_channel();
+        let recording = Arc::new(match (&options.session_dir, &options.recording_error) {
+            (Some(_), _) => RecordingStatus::recording(),
+            (None, Some(error)) => {
+                let status = RecordingStatus::default();
+                status.stop(error.clone());
+                status
+            }
+            (None, None) => RecordingStatus::default(),
+        });
         let mut threads = spawn_threads(
             gains,
             devices,
@@ -168,11 +378,13 @@ impl Daemon {
             clock,
             loop_shared.clone(),
             pipeline_shared.clone(),
+            recording.clone(),
         )?;
         let monitor_addr = threads.monitor.as_mut().and_then(|m| m.local_addr);
         let supervisor = {
             let loop_shared = loop_shared.clone();
             let pipeline_shared = pipeline_shared.clone();
+            let recording = recording.clone();
             thread::Builder::new()
                 .name("supervisor".into())
                 .spawn(move || {
@@ -180,13 +392,42 @@ impl Daemon {
                         .enable_all()
                         .build()
                         .context("starting the supervisor's runtime")?;
-                    runtime.block_on(supervise(
-                        options,
-                        threads,
-                        commands_rx,
-                        loop_shared,
-                        pipeline_shared,
-                    ))
+                    let started = Instant::now();
+                    let zeroed = threads.outputs_zeroed.clone();
+                    let run = std::panic::AssertUnwindSafe(|| {
+                        runtime.block_on(supervise(
+                            options,
+                            threads,
+                            commands_rx,
+                            loop_shared.clone(),
+                            pipeline_shared.clone(),
+                            recording.clone(),
+                        ))
+                    });
+                    match std::panic::catch_unwind(run) {
+                        Ok(outcome) => outcome,
+                        // The threads were stopped, outputs first, as `Threads` dropped.
+                        Err(_) => {
+                            let exit = ExitReason::ThreadFailed("supervisor".into());
+                            let mut stats = assemble_stats(
+                                started.elapsed().as_secs_f64(),
+                                None,
+                                None,
+                                &pipeline_shared,
+                                &loop_shared,
+                            );
+                            stats.stop = StopStats {
+                                reason: exit.describe(),
+                                outputs_zeroed: zeroed.load(Ordering::Relaxed),
+                            };
+                            stats.recording = recording_stats(&recording);
+                            Ok(Outcome {
+                                stats,
+                                exit,
+                                realtime: false,
+                            })
+                        }
+                    }
                 })
                 .context("starting the supervisor thread")?
         };
@@ -196,6 +437,7 @@ impl Daemon {
             loop_shared,
             pipeline_shared,
             monitor_addr,
+            recording,
         })
     }
 }
@@ -207,7 +449,9 @@ fn spawn_threads(
     clock: Clock,
     loop_shared: Arc<LoopShared>,
     pipeline_shared: Arc<PipelineShared>,
+    recording: Arc<RecordingStatus>,
 ) -> anyhow::Result<Threads> {
+    let devices = inject_panics(devices, options.inject.as_ref());
     let (frames_in, frames_out) = triple_buffer::triple_buffer(&TimedFrame::default());
     let (estimates_in, estimates_out) = triple_buffer::triple_buffer(&PublishedEstimate::default());
     let (ticks_tx, ticks_rx) = rtrb::RingBuffer::new(TICK_RING);
@@ -221,6 +465,8 @@ fn spawn_threads(
             let view = DaemonView {
                 loop_shared: loop_shared.clone(),
                 pipeline_shared: pipeline_shared.clone(),
+                recording: recording.clone(),
+                inject: options.inject.clone(),
             };
             let handle = monitor::start(config, reader, view, options.session_dir.clone())
                 .context("starting the monitor")?;
@@ -238,9 +484,12 @@ fn spawn_threads(
                 ticks: ticks_rx,
                 estimates: est_rx,
                 events: events_rx,
+                status: recording,
+                budget: options.recordings_budget.clone(),
+                inject: options.inject.clone(),
             };
             let handle = telemetry::spawn_recorder(recorder, stop.clone())
-                .with_context(|| format!("recording into {}", dir.display()))?;
+                .context("starting the telemetry thread")?;
             Some((handle, stop))
         }
         None => None,
@@ -260,6 +509,7 @@ fn spawn_threads(
             .spawn(move || pipeline::run_tracker(estimator, side, clock, shared))
             .context("starting the tracker thread")?
     };
+    let pipeline_for_threads = pipeline_shared.clone();
     let frames = pipeline::spawn_frames(
         devices.frames,
         frames_in,
@@ -268,6 +518,8 @@ fn spawn_threads(
         tracker.thread().clone(),
     )
     .context("starting the frames thread")?;
+    let outputs_zeroed = Arc::new(AtomicBool::new(false));
+    let shared_for_threads = loop_shared.clone();
     let haptic = HapticLoop::new(
         gains,
         devices.haptic,
@@ -282,14 +534,58 @@ fn spawn_threads(
     .spawn()
     .context("starting the haptic loop thread")?;
     Ok(Threads {
-        frames,
-        tracker,
-        haptic,
+        frames: Some(frames),
+        tracker: Some(tracker),
+        haptic: Some(haptic),
         recorder,
         events: events_tx,
         gains: gains_tx,
         monitor,
+        loop_shared: shared_for_threads,
+        pipeline_shared: pipeline_for_threads,
+        outputs_zeroed,
+        session_dir: options.session_dir.clone(),
     })
+}
+
+/// The devices with a test's panic injection wrapped around the one it names.
+fn inject_panics(devices: Devices, inject: Option<&PanicInjection>) -> Devices {
+    let Some(injection) = inject.cloned() else {
+        return devices;
+    };
+    let Devices {
+        mut frames,
+        mut estimator,
+        stage,
+        mut haptic,
+    } = devices;
+    match injection.thread {
+        "frames" => {
+            frames = Box::new(PanickingFrames {
+                inner: frames,
+                injection,
+            })
+        }
+        "tracker" => {
+            estimator = Box::new(PanickingEstimator {
+                inner: estimator,
+                injection,
+            })
+        }
+        "haptic-loop" => {
+            haptic = Box::new(PanickingHaptic {
+                inner: haptic,
+                injection,
+            })
+        }
+        _ => {}
+    }
+    Devices {
+        frames,
+        estimator,
+        stage,
+        haptic,
+    }
 }
 
 async fn supervise(
@@ -298,14 +594,17 @@ async fn supervise(
     mut commands: async_mpsc::UnboundedReceiver<Command>,
     loop_shared: Arc<LoopShared>,
     pipeline_shared: Arc<PipelineShared>,
+    recording: Arc<RecordingStatus>,
 ) -> anyhow::Result<Outcome> {
     let started = Instant::now();
     let mut signals = Signals::new(options.handle_signals)?;
     let notifier = std::mem::replace(&mut options.notifier, Notifier::disabled());
-    let mut health = Health::new(notifier);
+    let mut health = Health::new(notifier, recording.clone());
     let _ = health.notifier.ready();
     tracing::info!("nanoforce running: all devices up");
     let mut interval = tokio::time::interval(Duration::from_millis(100));
+    // A late look (after a slow reload) is not made up with a burst of looks.
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let deadline = options.duration.map(|d| started + d);
     let mut memory = MemoryWatch::default();
     let mut gate_log = GateLog::default();
@@ -315,13 +614,20 @@ async fn supervise(
             _ = interval.tick() => {}
             signal = signals.next() => match signal {
                 SignalEvent::Stop(name) => break ExitReason::Signal(name),
-                SignalEvent::Reload => reload(&options, &mut threads, &mut health),
+                SignalEvent::Reload => {
+                    reload(&options, &mut threads, &mut health);
+                    continue;
+                }
             },
             command = commands.recv() => match command {
-                Some(Command::Reload(gains)) => push_gains(&mut threads, *gains),
+                Some(Command::Reload(gains)) => {
+                    push_gains(&mut threads, *gains);
+                    continue;
+                }
                 Some(Command::Stop) | None => break ExitReason::Requested,
             },
         }
+        PanicInjection::check(options.inject.as_ref(), "supervisor");
         if let Some(failed) = dead_thread(&threads) {
             break ExitReason::ThreadFailed(failed);
         }
@@ -344,15 +650,20 @@ async fn supervise(
         }
     };
     let _ = health.notifier.stopping();
-    if let ExitReason::ThreadFailed(name) = &exit {
-        tracing::error!("{name} thread ended unexpectedly: stopping with outputs at zero");
-    } else {
-        tracing::info!("stopping ({exit:?})");
+    match &exit {
+        ExitReason::ThreadFailed(name) => {
+            tracing::error!("{name} thread ended unexpectedly: stopping with outputs at zero")
+        }
+        ExitReason::Signal(name) if !matches!(*name, "SIGINT" | "SIGTERM") => {
+            tracing::warn!("{name}: stopping with outputs at zero")
+        }
+        _ => tracing::info!("stopping ({exit:?})"),
     }
     health.finish_status_line(options.status_line);
     let duration_s = started.elapsed().as_secs_f64();
     memory.sample(duration_s);
-    let (loop_report, tracker_report) = stop_threads(threads, &loop_shared, &pipeline_shared);
+    let (loop_report, tracker_report) = threads.shut_down(&exit.describe());
+    let outputs_zeroed = threads.outputs_zeroed.load(Ordering::Relaxed);
     let realtime = loop_report.as_ref().is_some_and(|r| r.realtime);
     let mut stats = assemble_stats(
         duration_s,
@@ -362,11 +673,23 @@ async fn supervise(
         &loop_shared,
     );
     stats.memory = memory.stats();
+    stats.stop = StopStats {
+        reason: exit.describe(),
+        outputs_zeroed,
+    };
+    stats.recording = recording_stats(&recording);
     Ok(Outcome {
         stats,
         exit,
         realtime,
     })
+}
+
+fn recording_stats(recording: &RecordingStatus) -> RecordingStats {
+    RecordingStats {
+        state: recording.state().as_str().into(),
+        error: recording.error(),
+    }
 }
 
 fn push_gains(threads: &mut Threads, gains: TeleopGains) {
@@ -378,10 +701,29 @@ fn push_gains(threads: &mut Threads, gains: TeleopGains) {
 fn reload(options: &RunOptions, threads: &mut Threads, health: &mut Health) {
     let _ = health.notifier.reloading();
     match options.reload.as_ref().map(|load| load()) {
-        Some(Ok(gains)) => {
-            tracing::info!("SIGHUP: teleoperation gains reloaded; re-centre the stylus to resume");
-            let _ = threads.events.send("gains reloaded (SIGHUP)".into());
-            push_gains(threads, gains);
+        Some(Ok(reloaded)) => {
+            if reloaded.needs_restart.is_empty() {
+                tracing::info!(
+                    "SIGHUP: teleoperation gains reloaded; re-centre the stylus to resume"
+                );
+                let _ = threads.events.send("gains reloaded (SIGHUP)".into());
+            } else {
+                let sections = reloaded
+                    .needs_restart
+                    .iter()
+                    .map(|s| format!("[{s}]"))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                tracing::warn!(
+                    "SIGHUP: {sections} changed and need a restart to take effect \
+                     (systemctl restart nanoforce); they keep their old values until then. \
+                     [teleop] and [safety] reloaded; re-centre the stylus to resume"
+                );
+                let _ = threads.events.send(format!(
+                    "gains reloaded (SIGHUP); {sections} changed, need a restart"
+                ));
+            }
+            push_gains(threads, reloaded.gains);
         }
         Some(Err(e)) => {
             tracing::error!("SIGHUP: {e:#}; keeping the previous gains");
@@ -393,50 +735,32 @@ fn reload(options: &RunOptions, threads: &mut Threads, health: &mut Health) {
     health.resend_status();
 }
 
-/// The name of a loop thread that ended on its own (only a panic ends them early).
+/// The name of a thread that ended on its own (only a panic ends them early; a frame
+/// source that reached its end is not a failure).
 fn dead_thread(threads: &Threads) -> Option<String> {
-    if threads.haptic.is_finished() {
+    let ended = |h: Option<bool>| h.unwrap_or(false);
+    if ended(threads.haptic.as_ref().map(JoinHandle::is_finished)) {
         return Some("haptic-loop".into());
     }
-    if threads.tracker.is_finished() {
+    if ended(threads.tracker.as_ref().map(JoinHandle::is_finished)) {
         return Some("tracker".into());
     }
+    if ended(threads.frames.as_ref().map(JoinHandle::is_finished))
+        && !threads.pipeline_shared.source_ended.load(Ordering::Relaxed)
+    {
+        return Some("frames".into());
+    }
+    if ended(threads.recorder.as_ref().map(|(h, _)| h.is_finished())) {
+        return Some("telemetry".into());
+    }
+    if threads
+        .monitor
+        .as_ref()
+        .is_some_and(MonitorHandle::is_finished)
+    {
+        return Some("monitor".into());
+    }
     None
-}
-
-fn stop_threads(
-    threads: Threads,
-    loop_shared: &LoopShared,
-    pipeline_shared: &PipelineShared,
-) -> (Option<LoopReport>, Option<TrackerReport>) {
-    // The haptic loop first: its outputs are zeroed as it ends (or as it unwinds).
-    loop_shared.stop.store(true, Ordering::Relaxed);
-    let loop_report = threads.haptic.join().ok();
-    pipeline_shared.stop.store(true, Ordering::Relaxed);
-    threads.tracker.thread().unpark();
-    let tracker_report = threads.tracker.join().ok();
-    if let Some(monitor) = threads.monitor {
-        monitor.stop();
-    }
-    // A frame source may be blocked in a read (a pipe): give it a moment, then leave it.
-    let deadline = Instant::now() + Duration::from_secs(1);
-    while !threads.frames.is_finished() && Instant::now() < deadline {
-        thread::sleep(Duration::from_millis(10));
-    }
-    if threads.frames.is_finished() {
-        let _ = threads.frames.join();
-    } else {
-        tracing::warn!("frame source still blocked in a read; not waiting for it");
-    }
-    if let Some((handle, stop)) = threads.recorder {
-        stop.store(true, Ordering::Relaxed);
-        match handle.join() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::error!("telemetry recording failed: {e}"),
-            Err(_) => tracing::error!("telemetry thread panicked"),
-        }
-    }
-    (loop_report, tracker_report)
 }
 
 fn assemble_stats(
@@ -488,6 +812,8 @@ fn assemble_stats(
             ),
         },
         memory: MemoryStats::default(),
+        stop: StopStats::default(),
+        recording: RecordingStats::default(),
     }
 }
 
@@ -498,32 +824,48 @@ enum SignalEvent {
 }
 
 struct Signals {
-    streams: Option<[tokio::signal::unix::Signal; 3]>,
+    /// SIGHUP, then each of [`STOP_SIGNALS`].
+    streams: Vec<tokio::signal::unix::Signal>,
 }
 
 impl Signals {
+    /// tokio's handlers only note the signal and wake the supervisor (async-signal-safe);
+    /// everything else happens here, on the supervisor's thread.
     fn new(enabled: bool) -> anyhow::Result<Self> {
         use tokio::signal::unix::{signal, SignalKind};
         if !enabled {
-            return Ok(Signals { streams: None });
+            return Ok(Signals {
+                streams: Vec::new(),
+            });
         }
-        Ok(Signals {
-            streams: Some([
-                signal(SignalKind::interrupt()).context("installing the SIGINT handler")?,
-                signal(SignalKind::terminate()).context("installing the SIGTERM handler")?,
-                signal(SignalKind::hangup()).context("installing the SIGHUP handler")?,
-            ]),
-        })
+        let mut streams =
+            vec![signal(SignalKind::hangup()).context("installing the SIGHUP handler")?];
+        for (number, name) in STOP_SIGNALS {
+            streams.push(
+                signal(SignalKind::from_raw(number))
+                    .with_context(|| format!("installing the {name} handler"))?,
+            );
+        }
+        Ok(Signals { streams })
     }
 
     async fn next(&mut self) -> SignalEvent {
-        match &mut self.streams {
-            None => std::future::pending().await,
-            Some([int, term, hup]) => tokio::select! {
-                _ = int.recv() => SignalEvent::Stop("SIGINT"),
-                _ = term.recv() => SignalEvent::Stop("SIGTERM"),
-                _ = hup.recv() => SignalEvent::Reload,
-            },
+        if self.streams.is_empty() {
+            return std::future::pending().await;
+        }
+        let streams = &mut self.streams;
+        let index = std::future::poll_fn(|cx| {
+            for (i, stream) in streams.iter_mut().enumerate() {
+                if stream.poll_recv(cx).is_ready() {
+                    return std::task::Poll::Ready(i);
+                }
+            }
+            std::task::Poll::Pending
+        })
+        .await;
+        match index {
+            0 => SignalEvent::Reload,
+            i => SignalEvent::Stop(STOP_SIGNALS[i - 1].1),
         }
     }
 }

@@ -3,21 +3,31 @@
 //! once, not every tick), and the status for `systemctl status` and the terminal.
 use std::io::{IsTerminal, Write};
 use std::sync::atomic::Ordering;
-use std::sync::mpsc;
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use super::haptic_loop::LoopShared;
 use super::notify::Notifier;
 use super::pipeline::PipelineShared;
+use super::telemetry::{RecordingState, RecordingStatus};
 use crate::control::SafetyState;
 
 /// A frame source silent for longer than this makes the pipeline unhealthy.
 const FRAME_SILENCE: Duration = Duration::from_secs(2);
+/// The haptic loop stalled: its tick count has not moved for this long. Judged on time,
+/// not between two looks, so looks that come close together (a burst of SIGHUPs) do not
+/// see a 1 kHz loop "stop"; several times the supervisor's 100 ms look.
+const HAPTIC_SILENCE: Duration = Duration::from_millis(300);
+/// Before its first tick the loop is still preparing (real-time priority, locking its
+/// memory): not judged until it has run, or until this long after READY.
+const LOOP_START_GRACE: Duration = Duration::from_secs(2);
 
 pub(super) struct Health {
     pub notifier: Notifier,
     last_watchdog: Instant,
+    started: Instant,
     last_ticks: u64,
+    last_tick_at: Instant,
     last_frame_at: Instant,
     last_received: u64,
     healthy: bool,
@@ -26,6 +36,8 @@ pub(super) struct Health {
     last_status: Instant,
     status_text: String,
     terminal: bool,
+    recording: Arc<RecordingStatus>,
+    recording_state: RecordingState,
 }
 
 /// Counts at the last status, to turn into rates.
@@ -39,12 +51,15 @@ struct Rates {
 }
 
 impl Health {
-    pub fn new(notifier: Notifier) -> Self {
+    pub fn new(notifier: Notifier, recording: Arc<RecordingStatus>) -> Self {
         let now = Instant::now();
+        let recording_state = recording.state();
         Health {
             notifier,
             last_watchdog: now,
+            started: now,
             last_ticks: 0,
+            last_tick_at: now,
             last_frame_at: now,
             last_received: 0,
             healthy: true,
@@ -59,6 +74,8 @@ impl Health {
             last_status: now,
             status_text: String::new(),
             terminal: std::io::stderr().is_terminal(),
+            recording,
+            recording_state,
         }
     }
 
@@ -78,8 +95,11 @@ impl Health {
             self.last_received = received;
             self.last_frame_at = now;
         }
-        let haptic_alive = ticks > self.last_ticks;
-        self.last_ticks = ticks;
+        if ticks != self.last_ticks {
+            self.last_ticks = ticks;
+            self.last_tick_at = now;
+        }
+        let haptic_alive = haptic_alive(ticks, now - self.started, now - self.last_tick_at);
         let frames_alive = now - self.last_frame_at < FRAME_SILENCE
             || pipeline.source_ended.load(Ordering::Relaxed);
         let tracker_alive = received.saturating_sub(tracked) <= 2
@@ -100,7 +120,14 @@ impl Health {
         }
         self.feed_watchdog(now);
         self.log_changes(loop_shared, pipeline, events);
-        if now - self.last_status >= Duration::from_secs(1) {
+        let recording_state = self.recording.state();
+        let recording_changed = recording_state != self.recording_state;
+        if recording_changed {
+            self.recording_state = recording_state;
+            // The line reaches events.log only if the disk takes it.
+            let _ = events.send(self.recording.describe());
+        }
+        if recording_changed || now - self.last_status >= Duration::from_secs(1) {
             self.update_status(now, loop_shared, pipeline);
         }
         if status_line && self.terminal {
@@ -166,8 +193,12 @@ impl Health {
         } else {
             0.0
         };
+        let recording = match self.recording.state() {
+            RecordingState::Stopped => format!(" | {}", self.recording.describe()),
+            _ => String::new(),
+        };
         self.status_text = format!(
-            "{} | haptic {:.0} Hz, {} overruns | frames {:.1}/s, tracked {:.1}/s, detected {:.0}%, dropped {} | stale events {}, faults {}",
+            "{} | haptic {:.0} Hz, {} overruns | frames {:.1}/s, tracked {:.1}/s, detected {:.0}%, dropped {} | stale events {}, faults {}{recording}",
             self.state.as_str(),
             (current.ticks - self.rates.ticks) as f64 / span,
             loop_shared.overruns.load(Ordering::Relaxed),
@@ -194,10 +225,60 @@ impl Health {
     }
 }
 
+/// Whether the haptic loop counts as running: `ticks` so far, `since_start` READY,
+/// `since_tick` the count last moved.
+fn haptic_alive(ticks: u64, since_start: Duration, since_tick: Duration) -> bool {
+    if ticks == 0 {
+        since_start < LOOP_START_GRACE
+    } else {
+        since_tick < HAPTIC_SILENCE
+    }
+}
+
 fn alive(ok: bool) -> &'static str {
     if ok {
         "ok"
     } else {
         "stalled"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_loop_is_judged_once_it_has_run() {
+        let ms = Duration::from_millis;
+        // Not ticked yet, right after READY: preparing, not stalled.
+        assert!(haptic_alive(0, ms(0), ms(0)));
+        assert!(haptic_alive(0, ms(1500), ms(1500)));
+        assert!(!haptic_alive(0, ms(2500), ms(2500)));
+        // Two looks a few microseconds apart see the same count: still alive.
+        assert!(haptic_alive(5000, ms(5000), ms(0)));
+        assert!(haptic_alive(5000, ms(5000), ms(250)));
+        assert!(!haptic_alive(5000, ms(5000), ms(400)));
+    }
+
+    #[test]
+    fn back_to_back_looks_do_not_report_a_stall() {
+        let loop_shared = LoopShared::default();
+        let pipeline = PipelineShared::default();
+        let (events, _rx) = mpsc::channel();
+        let mut health = Health::new(Notifier::disabled(), Arc::new(RecordingStatus::default()));
+        // Right after READY the loop has not ticked.
+        health.check(&loop_shared, &pipeline, &events, false);
+        assert!(health.healthy);
+        loop_shared.ticks.store(10, Ordering::Relaxed);
+        health.check(&loop_shared, &pipeline, &events, false);
+        // A burst: the count has not moved between these looks.
+        for _ in 0..20 {
+            health.check(&loop_shared, &pipeline, &events, false);
+            assert!(health.healthy);
+        }
+        // Really stalled: judged so after HAPTIC_SILENCE.
+        std::thread::sleep(HAPTIC_SILENCE + Duration::from_millis(50));
+        health.check(&loop_shared, &pipeline, &events, false);
+        assert!(!health.healthy);
     }
 }

@@ -5,16 +5,21 @@
 //!
 //! A session folder holds `config.toml` (the configuration the run used), `ticks.csv`
 //! (the haptic loop, decimated), `estimates.csv` (one row per tracked frame) and
-//! `events.log` (faults and state changes).
+//! `events.log` (faults and state changes, written as they happen).
+//!
+//! A write that fails (a full disk) stops the recording and says so; the loops go on.
+//! `[daemon] recordings_max_mb` bounds the sessions: the oldest are deleted at start
+//! and while a run grows.
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use super::haptic_loop::TickRecord;
+use super::inject::PanicInjection;
 use super::pipeline::EstimateRecord;
 use crate::config::PixelOrigin;
 
@@ -74,6 +79,92 @@ fn utc_stamp(secs: u64) -> String {
     )
 }
 
+/// Whether the session is being recorded, shared by the writer thread (which sets it),
+/// the supervisor (status line, stats) and the monitor page.
+#[derive(Debug, Default)]
+pub struct RecordingStatus {
+    state: AtomicU8,
+    error: Mutex<Option<String>>,
+}
+
+/// What [`RecordingStatus`] says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordingState {
+    /// This run records nothing (`--no-record`).
+    Off,
+    Recording,
+    /// Recording stopped during the run (a full disk, a write error, the budget); the
+    /// loops go on.
+    Stopped,
+}
+
+impl RecordingState {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RecordingState::Off => "off",
+            RecordingState::Recording => "recording",
+            RecordingState::Stopped => "stopped",
+        }
+    }
+}
+
+impl RecordingStatus {
+    pub fn recording() -> Self {
+        let status = RecordingStatus::default();
+        status.state.store(1, Ordering::Relaxed);
+        status
+    }
+
+    pub fn state(&self) -> RecordingState {
+        match self.state.load(Ordering::Relaxed) {
+            1 => RecordingState::Recording,
+            2 => RecordingState::Stopped,
+            _ => RecordingState::Off,
+        }
+    }
+
+    /// Why recording stopped, if it did.
+    pub fn error(&self) -> Option<String> {
+        self.error.lock().ok().and_then(|e| e.clone())
+    }
+
+    /// Recording stops for `reason` (the first reason is kept); logged once, as a warning.
+    pub fn stop(&self, reason: String) {
+        if self.state.swap(2, Ordering::Relaxed) == 2 {
+            return;
+        }
+        tracing::warn!("recording stopped: {reason}; control goes on");
+        if let Ok(mut e) = self.error.lock() {
+            *e = Some(reason);
+        }
+    }
+
+    /// One phrase for status lines: "recording", "recording off", "recording stopped: ...".
+    pub fn describe(&self) -> String {
+        match self.state() {
+            RecordingState::Off => "recording off".into(),
+            RecordingState::Recording => "recording".into(),
+            RecordingState::Stopped => format!(
+                "recording stopped: {}",
+                self.error().unwrap_or_else(|| "unknown error".into())
+            ),
+        }
+    }
+}
+
+/// The recordings' size limit (`[daemon] recordings_max_mb`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Budget {
+    /// `state_dir/sessions`.
+    pub sessions_dir: PathBuf,
+    pub max_bytes: u64,
+}
+
+/// How often the writer flushes its files: a crash loses at most this much telemetry.
+const FLUSH_EVERY: Duration = Duration::from_millis(500);
+/// How often a running session checks the recordings against the budget.
+const BUDGET_EVERY: Duration = Duration::from_secs(10);
+
 /// The writer thread's inputs.
 pub struct Recorder {
     pub dir: PathBuf,
@@ -82,50 +173,222 @@ pub struct Recorder {
     pub ticks: rtrb::Consumer<TickRecord>,
     pub estimates: rtrb::Consumer<EstimateRecord>,
     pub events: std::sync::mpsc::Receiver<String>,
+    pub status: Arc<RecordingStatus>,
+    pub budget: Option<Budget>,
+    /// A panic to inject into this thread (tests only).
+    pub inject: Option<PanicInjection>,
+}
+
+/// The session's open files.
+struct Files {
+    ticks: BufWriter<File>,
+    estimates: BufWriter<File>,
+    events: BufWriter<File>,
+}
+
+impl Files {
+    fn create(dir: &Path) -> io::Result<Files> {
+        let open = |name: &str| {
+            let path = dir.join(name);
+            File::create(&path)
+                .map(BufWriter::new)
+                .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))
+        };
+        let mut files = Files {
+            ticks: open("ticks.csv")?,
+            estimates: open("estimates.csv")?,
+            events: open("events.log")?,
+        };
+        writeln!(
+            files.ticks,
+            "t_s,period_us,pos_x_mm,pos_y_mm,pos_z_mm,force_x_n,force_y_n,force_z_n,\
+             vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
+             gate_attenuated"
+        )?;
+        writeln!(
+            files.estimates,
+            "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
+             confidence,processing_ms,true_force_nN"
+        )?;
+        files.flush()?;
+        Ok(files)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.ticks.flush()?;
+        self.estimates.flush()?;
+        self.events.flush()
+    }
 }
 
 /// Starts the `telemetry` thread; it drains until `stop` is set, then flushes and ends.
+/// Events reach `events.log` as they happen; the CSV files are flushed every
+/// [`FLUSH_EVERY`]. A write that fails (a full disk) stops the recording, reported
+/// through `recorder.status`; the thread keeps draining the rings so the loops never
+/// notice.
 pub fn spawn_recorder(
-    mut recorder: Recorder,
+    recorder: Recorder,
     stop: Arc<AtomicBool>,
 ) -> io::Result<JoinHandle<io::Result<()>>> {
-    let mut ticks = BufWriter::new(File::create(recorder.dir.join("ticks.csv"))?);
-    let mut estimates = BufWriter::new(File::create(recorder.dir.join("estimates.csv"))?);
-    let mut events = BufWriter::new(File::create(recorder.dir.join("events.log"))?);
-    writeln!(
-        ticks,
-        "t_s,period_us,pos_x_mm,pos_y_mm,pos_z_mm,force_x_n,force_y_n,force_z_n,\
-         vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
-         gate_attenuated"
-    )?;
-    writeln!(
-        estimates,
-        "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
-         confidence,processing_ms,true_force_nN"
-    )?;
     thread::Builder::new()
         .name("telemetry".into())
-        .spawn(move || {
-            loop {
-                let stopping = stop.load(Ordering::Relaxed);
-                while let Ok(r) = recorder.ticks.pop() {
-                    write_tick(&mut ticks, &r)?;
-                }
-                while let Ok(r) = recorder.estimates.pop() {
-                    write_estimate(&mut estimates, &r, recorder.pixel_origin)?;
-                }
-                while let Ok(line) = recorder.events.try_recv() {
-                    writeln!(events, "{line}")?;
-                }
-                if stopping {
-                    break;
-                }
-                thread::sleep(Duration::from_millis(50));
+        .spawn(move || record(recorder, &stop))
+}
+
+fn record(mut recorder: Recorder, stop: &AtomicBool) -> io::Result<()> {
+    let status = recorder.status.clone();
+    let dir = recorder.dir.clone();
+    let fail = |e: io::Error| status.stop(format!("{}: {e}", dir.display()));
+    let mut files = match Files::create(&recorder.dir) {
+        Ok(files) => Some(files),
+        Err(e) => {
+            fail(e);
+            None
+        }
+    };
+    let mut last_flush = Instant::now();
+    let mut last_budget = Instant::now();
+    loop {
+        PanicInjection::check(recorder.inject.as_ref(), "telemetry");
+        let stopping = stop.load(Ordering::Relaxed);
+        if let Some(f) = files.as_mut() {
+            if let Err(e) = drain(&mut recorder, f) {
+                fail(e);
+                files = None;
             }
-            ticks.flush()?;
-            estimates.flush()?;
-            events.flush()
+        } else {
+            discard(&mut recorder);
+        }
+        if let Some(f) = files.as_mut() {
+            if last_flush.elapsed() >= FLUSH_EVERY || stopping {
+                last_flush = Instant::now();
+                if let Err(e) = f.flush() {
+                    fail(e);
+                    files = None;
+                }
+            }
+        }
+        if files.is_some() && last_budget.elapsed() >= BUDGET_EVERY {
+            last_budget = Instant::now();
+            if let Some(budget) = &recorder.budget {
+                let own = dir_size(&recorder.dir);
+                if own > budget.max_bytes {
+                    status.stop(format!(
+                        "this session reached daemon.recordings_max_mb ({} MB)",
+                        budget.max_bytes / MB
+                    ));
+                    files = None;
+                } else {
+                    prune_sessions(budget, Some(&recorder.dir));
+                }
+            }
+        }
+        if stopping {
+            return Ok(());
+        }
+        thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn drain(recorder: &mut Recorder, files: &mut Files) -> io::Result<()> {
+    while let Ok(r) = recorder.ticks.pop() {
+        write_tick(&mut files.ticks, &r)?;
+    }
+    while let Ok(r) = recorder.estimates.pop() {
+        write_estimate(&mut files.estimates, &r, recorder.pixel_origin)?;
+    }
+    let mut wrote_event = false;
+    while let Ok(line) = recorder.events.try_recv() {
+        writeln!(files.events, "{line}")?;
+        wrote_event = true;
+    }
+    if wrote_event {
+        files.events.flush()?;
+    }
+    Ok(())
+}
+
+fn discard(recorder: &mut Recorder) {
+    while recorder.ticks.pop().is_ok() {}
+    while recorder.estimates.pop().is_ok() {}
+    while recorder.events.try_recv().is_ok() {}
+}
+
+const MB: u64 = 1024 * 1024;
+
+/// Bytes in the files under `dir` (not following links).
+pub fn dir_size(dir: &Path) -> u64 {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .map(|e| match e.file_type() {
+            Ok(t) if t.is_dir() => dir_size(&e.path()),
+            Ok(t) if t.is_file() => e.metadata().map_or(0, |m| m.len()),
+            _ => 0,
         })
+        .sum()
+}
+
+/// Whether `name` is a session folder's name, `YYYYmmddTHHMMSSZ-<pid>`.
+fn is_session_name(name: &str) -> bool {
+    let b = name.as_bytes();
+    b.len() > 17
+        && b[..8].iter().all(u8::is_ascii_digit)
+        && b[8] == b'T'
+        && b[9..15].iter().all(u8::is_ascii_digit)
+        && b[15] == b'Z'
+        && b[16] == b'-'
+        && b[17..].iter().all(u8::is_ascii_digit)
+}
+
+/// Deletes the oldest session folders until the recordings fit `budget` (`keep`, the
+/// running session, is counted but never deleted); each deletion is logged. Returns the
+/// deleted folders.
+pub fn prune_sessions(budget: &Budget, keep: Option<&Path>) -> Vec<PathBuf> {
+    let Ok(entries) = fs::read_dir(&budget.sessions_dir) else {
+        return Vec::new();
+    };
+    let mut sessions: Vec<(String, PathBuf)> = entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .filter_map(|e| {
+            let name = e.file_name().to_str()?.to_string();
+            is_session_name(&name).then(|| (name, e.path()))
+        })
+        .collect();
+    // The names start with the UTC time: sorted by name is oldest first.
+    sessions.sort();
+    let sizes: Vec<u64> = sessions.iter().map(|(_, p)| dir_size(p)).collect();
+    let mut total: u64 = sizes.iter().sum::<u64>()
+        + keep
+            .filter(|k| !sessions.iter().any(|(_, p)| p == k))
+            .map_or(0, dir_size);
+    let mut pruned = Vec::new();
+    for ((_, path), size) in sessions.iter().zip(sizes) {
+        if total <= budget.max_bytes {
+            break;
+        }
+        if keep == Some(path.as_path()) {
+            continue;
+        }
+        match fs::remove_dir_all(path) {
+            Ok(()) => {
+                tracing::info!(
+                    "recordings over daemon.recordings_max_mb ({} MB): deleted the oldest \
+                     session {} ({:.1} MB)",
+                    budget.max_bytes / MB,
+                    path.display(),
+                    size as f64 / MB as f64
+                );
+                total -= size;
+                pruned.push(path.clone());
+            }
+            Err(e) => tracing::warn!("recordings budget: cannot delete {}: {e}", path.display()),
+        }
+    }
+    pruned
 }
 
 fn write_tick(out: &mut impl Write, r: &TickRecord) -> io::Result<()> {
@@ -182,6 +445,44 @@ mod tests {
         assert_eq!(utc_stamp(0), "19700101T000000Z");
         assert_eq!(utc_stamp(951_782_400), "20000229T000000Z");
         assert_eq!(utc_stamp(1_795_000_000), "20261118T110640Z");
+    }
+
+    #[test]
+    fn the_budget_deletes_the_oldest_sessions_only() {
+        let state = tempfile::tempdir().unwrap();
+        let sessions = state.path().join("sessions");
+        let make = |name: &str, kib: usize| {
+            let dir = sessions.join(name);
+            fs::create_dir_all(dir.join("thumbnails")).unwrap();
+            fs::write(dir.join("thumbnails/a.png"), vec![0u8; kib * 1024]).unwrap();
+            dir
+        };
+        make("20250101T000000Z-1", 400);
+        make("20250102T000000Z-2", 400);
+        let newest = make("20250103T000000Z-3", 400);
+        let running = make("20250104T000000Z-4", 500);
+        let other = sessions.join("not-a-session");
+        fs::create_dir_all(&other).unwrap();
+        fs::write(other.join("big"), vec![0u8; 900 * 1024]).unwrap();
+        assert!(is_session_name("20250104T000000Z-4") && !is_session_name("20250104-4"));
+        let budget = Budget {
+            sessions_dir: sessions.clone(),
+            max_bytes: MB,
+        };
+        let pruned = prune_sessions(&budget, Some(&running));
+        // 1.7 MiB of sessions against 1 MiB: the two oldest go; the running one and
+        // anything that is not a session stay.
+        assert_eq!(
+            pruned,
+            vec![
+                sessions.join("20250101T000000Z-1"),
+                sessions.join("20250102T000000Z-2")
+            ]
+        );
+        assert!(newest.exists() && running.exists() && other.exists());
+        assert_eq!(dir_size(&newest), 400 * 1024);
+        // Within the budget: nothing more goes.
+        assert!(prune_sessions(&budget, Some(&running)).is_empty());
     }
 
     #[test]

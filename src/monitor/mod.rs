@@ -26,8 +26,10 @@ pub use self::config::MonitorConfig;
 use self::server::Hub;
 use self::state::Producer;
 use crate::daemon::haptic_loop::LoopShared;
+use crate::daemon::inject::PanicInjection;
 use crate::daemon::pipeline::PipelineShared;
 use crate::daemon::snapshot::SnapshotReader;
+use crate::daemon::telemetry::RecordingStatus;
 
 /// How often the page is updated.
 pub const UPDATE_PERIOD: Duration = Duration::from_millis(100);
@@ -37,6 +39,10 @@ pub const UPDATE_PERIOD: Duration = Duration::from_millis(100);
 pub struct DaemonView {
     pub loop_shared: Arc<LoopShared>,
     pub pipeline_shared: Arc<PipelineShared>,
+    /// Whether the session is being recorded (shown on the page).
+    pub recording: Arc<RecordingStatus>,
+    /// A panic to inject into the monitor thread (tests only).
+    pub inject: Option<PanicInjection>,
 }
 
 /// A running monitor thread.
@@ -48,6 +54,11 @@ pub struct MonitorHandle {
 }
 
 impl MonitorHandle {
+    /// The thread ended on its own (only a panic ends it before [`MonitorHandle::stop`]).
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_some_and(JoinHandle::is_finished)
+    }
+
     /// Stops the thread and waits for it (it checks every [`UPDATE_PERIOD`]).
     pub fn stop(mut self) {
         self.stop.store(true, Ordering::Relaxed);

@@ -14,6 +14,7 @@ use serde_json::json;
 
 use super::server::Hub;
 use super::DaemonView;
+use crate::daemon::inject::PanicInjection;
 use crate::daemon::snapshot::{FrameSnapshot, SnapshotReader};
 use crate::report::thumbs::{overlay_at_width, THUMB_WIDTH};
 use crate::vision::{EdgeFit, Estimate};
@@ -74,6 +75,7 @@ impl Producer {
 
     /// One update.
     pub fn step(&mut self) {
+        PanicInjection::check(self.view.inject.as_ref(), "monitor");
         self.steps += 1;
         while let Ok(e) = self.reader.estimates.pop() {
             let force = if e.detected { e.force_nn } else { f64::NAN };
@@ -160,6 +162,8 @@ impl Producer {
             "force": self.fresh,
             "state": state.as_str(),
             "fault": state.is_fault(),
+            "recording": self.view.recording.state().as_str(),
+            "recording_error": self.view.recording.error(),
             "rates": self.rates.json,
             "counters": {
                 "overruns": l.overruns.load(Ordering::Relaxed),
