@@ -167,6 +167,21 @@ pub fn calibration_block(
             e.clicked_orientation_deg - e.orientation_deg
         ));
     }
+    let side = |edge: Edge| {
+        let e = calibration.edge(edge);
+        let word = if e.polarity > 0.0 {
+            "brighter"
+        } else {
+            "darker"
+        };
+        format!("{} {word} ({:+.0})", edge.name(), e.contrast)
+    };
+    out.push_str(&format!(
+        "# The probe's side of each edge, grey levels: {}, {}, {}\n",
+        side(Edge::Red),
+        side(Edge::Blue),
+        side(Edge::Green)
+    ));
     let apex = origin.output(calibration.apex_px());
     out.push_str(&format!(
         "# Apex (blue meets green): ({:.2}, {:.2}) px\n",

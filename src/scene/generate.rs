@@ -190,3 +190,203 @@ pub fn suite(seed: u64, sessions: usize, frames_per_session: usize) -> Vec<Sessi
         })
         .collect()
 }
+
+/// One condition of the real-background suite, beyond the real background itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Condition {
+    /// The probe 10-20 grey levels from a quiet background (noise at most 5).
+    LowContrast,
+    /// A bright background (mean 150-185), its texture 0.3-0.45 of the probe's contrast
+    /// (45-70 levels).
+    BrightTexture,
+    /// The brightness drifting by up to +-30 % over the session.
+    Charging,
+    /// 5-15 % of the rows shifted by a pixel.
+    Jitter,
+    /// Noise sigma 30-48 (with a contrast of 60-90 levels).
+    HighNoise,
+    /// A tapered needle in view.
+    Needle,
+}
+
+/// The real-background suite's sessions: one or two conditions each (never low
+/// contrast with high noise: nobody could see that probe), in this order, each with a
+/// brighter and (next session) a darker probe than its background.
+const REAL_CONDITIONS: [&[Condition]; 12] = {
+    use Condition::*;
+    [
+        &[LowContrast],
+        &[BrightTexture],
+        &[Charging],
+        &[Jitter],
+        &[HighNoise],
+        &[Needle],
+        &[LowContrast, BrightTexture],
+        &[Charging, Needle],
+        &[HighNoise, Jitter],
+        &[LowContrast, Needle],
+        &[BrightTexture, HighNoise],
+        &[Charging, Jitter],
+    ]
+};
+
+/// A session's look over a real background, before the per-frame noise and charging.
+#[derive(Debug, Clone, Copy)]
+struct RealScene {
+    look: Look,
+    noise: (f64, f64),
+    charging: bool,
+    needle: Option<(f64, f64)>,
+    needle_level: f64,
+}
+
+fn real_scene(conditions: &[Condition], dark: bool, crops: usize, rng: &mut Rng) -> RealScene {
+    use Condition::*;
+    let has = |c| conditions.contains(&c);
+    let mut look = Style::Clean.look();
+    look.style_name = if dark { "real-dark" } else { "real-bright" };
+    look.particles = 0;
+    look.scratches = 0;
+    look.substrate = None;
+    look.blur_sigma_px = rng.uniform(0.8, 1.4);
+    let mut level = rng.uniform(70.0, 140.0);
+    let mut contrast = rng.uniform(35.0, 70.0);
+    // The background's texture as a share of the probe's contrast: a person still
+    // sees every edge of the probe where the ground's own structures are fainter.
+    let mut texture = rng.uniform(0.15, 0.3);
+    let mut noise = (4.0, 14.0);
+    if has(LowContrast) {
+        contrast = rng.uniform(10.0, 20.0);
+        texture = rng.uniform(0.1, 0.2);
+        noise = (2.0, 5.0);
+    }
+    if has(BrightTexture) {
+        level = rng.uniform(150.0, 185.0);
+        if !has(LowContrast) {
+            contrast = rng.uniform(45.0, 70.0);
+            texture = rng.uniform(0.3, 0.45);
+        }
+    }
+    if has(HighNoise) {
+        contrast = rng.uniform(60.0, 90.0);
+        noise = (30.0, 48.0);
+    }
+    if has(Jitter) {
+        look.jitter_fraction = rng.uniform(0.05, 0.15);
+    }
+    // Keep the probe's level on the 8-bit scale.
+    level = if dark {
+        level.max(contrast + 25.0)
+    } else {
+        level.min(235.0 - contrast)
+    };
+    look.real = Some(super::background::RealLook {
+        crop: rng.int(0, crops.max(1) as u32 - 1) as usize,
+        window_seed: rng.next_u64(),
+        zoom: rng.uniform(1.0, 1.6),
+        level,
+        texture_sigma: texture * contrast,
+    });
+    look.background = level;
+    look.shading = 0.0;
+    look.probe = if dark {
+        level - contrast
+    } else {
+        level + contrast
+    };
+    look.probe_ramp = rng.uniform(-8.0, 8.0);
+    let needle = has(Needle).then(|| (rng.uniform(20.0, 70.0), rng.uniform(10.0, 25.0)));
+    let needle_level = look.probe + rng.uniform(-10.0, 10.0);
+    RealScene {
+        look,
+        noise,
+        charging: has(Charging),
+        needle,
+        needle_level,
+    }
+}
+
+/// The needle of `scene` beside the probe of `spec`: its point 70-150 px away from the
+/// apex, away from the beam and below it, its base beyond the frame's border.
+fn place_needle(scene: &RealScene, spec: &FrameSpec, rng: &mut Rng) -> Option<super::Needle> {
+    let (tilt_deg, width) = scene.needle?;
+    let away = if spec.entry == Entry::Left { 1.0 } else { -1.0 };
+    let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+    let tip = [
+        (spec.apex_px[0] + away * rng.uniform(70.0, 150.0)).clamp(10.0, w - 10.0),
+        (spec.apex_px[1] + rng.uniform(30.0, 110.0)).clamp(10.0, h - 10.0),
+    ];
+    let a = tilt_deg.to_radians();
+    let reach = w + h;
+    Some(super::Needle {
+        base: [tip[0] + away * reach * a.cos(), tip[1] + reach * a.sin()],
+        tip,
+        base_width_px: width,
+        level: scene.needle_level,
+    })
+}
+
+/// The real-background suite: `sessions` sessions of `frames_per_session` 640x480
+/// frames over crops of real SEM frames (`crops` of them, passed to the renderer by the
+/// caller), each session showing one or two of the conditions of a real SEM (low
+/// contrast, a bright textured background, charging, scan-line jitter, noise up to 48,
+/// a second needle) with a probe brighter than its background in every other session
+/// and darker in the rest. Frames mix magnifications 1000x-8000x, angles within +-20 deg,
+/// apex placements and blank frames; each session's reference shows the same scene at
+/// rest with little noise. Deterministic from `seed`.
+pub fn real_suite(
+    seed: u64,
+    sessions: usize,
+    frames_per_session: usize,
+    crops: usize,
+) -> Vec<Session> {
+    (0..sessions)
+        .map(|i| {
+            let session_seed = sub_seed(seed, 500 + i as u64);
+            let mut setup = Setup::random(session_seed, 640, 480);
+            setup.entry = if (i / 2) % 2 == 0 {
+                Entry::Left
+            } else {
+                Entry::Right
+            };
+            let mut rng = Rng::new(sub_seed(session_seed, 4));
+            let dark = (i + i / REAL_CONDITIONS.len()) % 2 == 1;
+            let conditions = REAL_CONDITIONS[i % REAL_CONDITIONS.len()];
+            let scene = real_scene(conditions, dark, crops, &mut rng);
+            let mut reference = setup.reference(session_seed);
+            reference.look = Look {
+                noise_sigma: 3.0,
+                jitter_fraction: 0.0,
+                ..scene.look
+            };
+            reference.look.needle = place_needle(&scene, &reference, &mut rng);
+            let phase = rng.uniform(0.0, std::f64::consts::TAU);
+            let frames = (0..frames_per_session)
+                .map(|k| {
+                    let mag = rng.log_uniform(1000.0, 8000.0).round();
+                    let angle = rng.uniform(-20.0, 20.0);
+                    let mut spec = random_frame(&setup, Style::Clean, mag, angle, &mut rng);
+                    spec.look = scene.look;
+                    spec.look.noise_sigma = rng.uniform(scene.noise.0, scene.noise.1);
+                    if scene.charging {
+                        let t = k as f64 / frames_per_session as f64;
+                        spec.look.charging_gain =
+                            1.0 + 0.3 * (std::f64::consts::TAU * t + phase).sin();
+                    }
+                    spec.look.needle = place_needle(&scene, &spec, &mut rng);
+                    spec
+                })
+                .collect();
+            Session {
+                reference,
+                frames,
+                times_s: (0..frames_per_session)
+                    .map(|k| k as f64 / FRAME_RATE_HZ)
+                    .collect(),
+                threshold: Threshold::Otsu,
+                window_deg: DEFAULT_WINDOW_DEG,
+                click_seed: sub_seed(session_seed, 3),
+            }
+        })
+        .collect()
+}

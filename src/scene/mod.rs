@@ -16,6 +16,7 @@
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of
 //! the bent beam is [`crate::model`]'s exact elastica; nothing here duplicates it.
+mod background;
 mod blur;
 mod clutter;
 mod generate;
@@ -30,8 +31,9 @@ use std::cell::RefCell;
 
 use image::GrayImage;
 
+pub use background::{Needle, RealLook};
 pub use clutter::{Particle, Scratch};
-pub use generate::{random_frame, suite, varied_look, BLANK_FRACTION};
+pub use generate::{random_frame, real_suite, suite, varied_look, BLANK_FRACTION};
 pub use geometry::{px_per_um, Edges, Entry, Pose, ProbeGeometry, Segment, FIELD_WIDTH_AT_1X_UM};
 pub use render::{force_nn, Renderer, Truth};
 pub use session::{
@@ -47,6 +49,12 @@ thread_local! {
 /// so after the first frame of a size nothing is allocated) and returns the truth.
 pub fn render_into(spec: &FrameSpec, frame: &mut GrayImage) -> Truth {
     RENDERER.with(|r| r.borrow_mut().render_into(spec, frame))
+}
+
+/// As [`render_into`], over the caller's crops of real SEM frames when `spec.look.real`
+/// asks for one (see [`Renderer::render_over`]).
+pub fn render_over_into(spec: &FrameSpec, crops: &[GrayImage], frame: &mut GrayImage) -> Truth {
+    RENDERER.with(|r| r.borrow_mut().render_over(spec, crops, frame))
 }
 
 /// Renders `spec` into a new frame.

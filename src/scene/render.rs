@@ -6,6 +6,7 @@
 
 use image::GrayImage;
 
+use super::background::{charge, fill_real, needle_polygon};
 use super::blur::Blur;
 use super::clutter::{self, Particle, Scratch, Shading};
 use super::geometry::{probe_outline, Edges};
@@ -65,7 +66,20 @@ impl Renderer {
     /// Renders `spec` into `frame` (reallocated only if its size differs) and returns
     /// the truth.
     pub fn render_into(&mut self, spec: &FrameSpec, frame: &mut GrayImage) -> Truth {
-        let truth = self.render_canvas(spec);
+        self.render_over(spec, &[], frame)
+    }
+
+    /// As [`Renderer::render_into`], with the caller's crops of real SEM frames: when
+    /// `spec.look.real` names one (index modulo `crops.len()`), the frame shows its
+    /// seeded window instead of the synthetic shading. Without crops the synthetic
+    /// background is drawn.
+    pub fn render_over(
+        &mut self,
+        spec: &FrameSpec,
+        crops: &[GrayImage],
+        frame: &mut GrayImage,
+    ) -> Truth {
+        let truth = self.render_canvas_over(spec, crops);
         if frame.dimensions() != (spec.width, spec.height) {
             *frame = GrayImage::new(spec.width, spec.height);
         }
@@ -78,6 +92,12 @@ impl Renderer {
 
     /// Renders the noisy frame into the internal f32 canvas (grey levels, unclamped).
     pub fn render_canvas(&mut self, spec: &FrameSpec) -> Truth {
+        self.render_canvas_over(spec, &[])
+    }
+
+    /// As [`Renderer::render_canvas`], over the caller's crops (see
+    /// [`Renderer::render_over`]).
+    pub fn render_canvas_over(&mut self, spec: &FrameSpec, crops: &[GrayImage]) -> Truth {
         let (w, h) = (spec.width as usize, spec.height as usize);
         if self.canvas.len() != w * h {
             // Room for the longest outlines a frame of this size can need (the beam is
@@ -94,8 +114,16 @@ impl Renderer {
         }
         self.canvas.resize(w * h, 0.0);
         self.raster.resize(spec.width, spec.height);
-        self.draw_background(spec);
+        self.draw_background(spec, crops);
+        if let Some(needle) = spec.look.needle {
+            needle_polygon(&needle, &mut self.polygon);
+            let level = needle.level as f32;
+            paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, |_| {
+                level
+            });
+        }
         let truth = self.draw_probe(spec);
+        charge(&mut self.canvas, spec.look.charging_gain);
         self.blur
             .apply(&mut self.canvas, w, h, spec.look.blur_sigma_px);
         self.jitter(spec);
@@ -109,11 +137,16 @@ impl Renderer {
         &self.canvas
     }
 
-    fn draw_background(&mut self, spec: &FrameSpec) {
+    fn draw_background(&mut self, spec: &FrameSpec, crops: &[GrayImage]) {
         let w = spec.width as usize;
-        let mut rng = Rng::new(sub_seed(spec.seed, STREAM_SHADING));
-        self.shading.generate(spec, &mut rng);
-        self.shading.fill(&mut self.canvas, w, &mut self.line);
+        match spec.look.real.filter(|_| !crops.is_empty()) {
+            Some(real) => fill_real(&mut self.canvas, w, &crops[real.crop % crops.len()], &real),
+            None => {
+                let mut rng = Rng::new(sub_seed(spec.seed, STREAM_SHADING));
+                self.shading.generate(spec, &mut rng);
+                self.shading.fill(&mut self.canvas, w, &mut self.line);
+            }
+        }
         let mut rng = Rng::new(sub_seed(spec.seed, STREAM_SCRATCHES));
         clutter::scratches(spec, &mut rng, &mut self.scratches);
         for s in &self.scratches {

@@ -2,6 +2,7 @@
 //! knobs) and the four presets of the public samples ([`Style`]: clean, clutter, noisy,
 //! harsh). The preset values were measured on the public sessions (docs/renderer.md).
 
+use super::background::{Needle, RealLook};
 use super::geometry::{px_per_um, Entry, Pose, ProbeGeometry};
 
 /// The looks of the public samples, from an easy frame to a hard one.
@@ -47,6 +48,9 @@ impl Style {
             particles: 3,
             scratches: 0,
             substrate: None,
+            real: None,
+            needle: None,
+            charging_gain: 1.0,
         };
         match self {
             Style::Clean => base,
@@ -122,6 +126,15 @@ pub struct Look {
     pub scratches: u32,
     /// Level of the substrate surface below the apex, or none.
     pub substrate: Option<f64>,
+    /// A crop of a real SEM frame as the background instead of the synthetic shading
+    /// (the caller passes the crops to `Renderer::render_over`); none in every preset.
+    /// `probe` may then lie below the background (a darker probe) as well as above it.
+    pub real: Option<RealLook>,
+    /// A second probe-like object (a tapered needle) in view; none in every preset.
+    pub needle: Option<Needle>,
+    /// Charging: the whole ideal image multiplied by this before blur and noise (a
+    /// session drifts it by +-30 %); 1 in every preset.
+    pub charging_gain: f64,
 }
 
 /// Everything that determines one frame; rendering it is a pure function of this.

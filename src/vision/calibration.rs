@@ -15,7 +15,7 @@ use image::GrayImage;
 use super::bands::{bands, BendPrior};
 use super::candidates::angle_gap;
 use super::edges::EdgeMap;
-use super::geometry::{along, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
+use super::geometry::{add, along, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner, Turns};
 use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
@@ -34,6 +34,14 @@ const REST_BEND_SIGMA_PX: f64 = 0.03;
 /// equally far from the apex's foot along the beam do not tell which way its free end
 /// is (see `free_end`).
 const SYMMETRIC_BASES: f64 = 0.2;
+/// Smallest mean grey-level difference between the two sides of the clicked pixels (3 to
+/// 6 px from them) from which an edge's polarity is taken: a face 5 levels above or
+/// below its background on a reference with noise 3 measures 4-6, blank ground 0-1.
+const MIN_SIDE_CONTRAST: f64 = 2.5;
+/// The tracker masks edge pixels with its grey-level threshold only if the probe's
+/// side of every calibrated edge clears that threshold on the reference by this share
+/// of the edge's contrast (and the probe is brighter across every edge).
+const MASK_MARGIN: f64 = 0.25;
 /// Initial blur guess for the grey-level fit, pixels.
 pub const BLUR0_PX: f64 = 1.2;
 
@@ -44,12 +52,17 @@ pub struct CalibratedEdge {
     pub orientation_deg: f64,
     /// The same from the clicks alone (for comparison).
     pub clicked_orientation_deg: f64,
-    /// Refined line; its normal points into the probe.
+    /// Refined line; its normal points into the probe (whichever side is brighter).
     pub line: Line,
+    /// +1 when the probe's side of the edge is the brighter one on the reference, -1
+    /// when it is the darker one. Learned from the grey levels beside the clicks; the
+    /// tracker looks for this edge's gradient only in this direction.
+    pub polarity: f64,
     /// Segment endpoints in the reference: the corner end (apex, or the beam's free end)
     /// first.
     pub segment_px: [[f64; 2]; 2],
-    /// Grey-level step across the edge.
+    /// Grey-level step across the edge from outside to inside the probe: positive for a
+    /// brighter probe, negative for a darker one.
     pub contrast: f64,
     /// Standard error of `orientation_deg` from the reference's noise: how well the
     /// reference fixes this edge's direction. The tracker weighs a frame's edges by it
@@ -64,6 +77,7 @@ pub struct Calibration {
     template: Template,
     image_size: [u32; 2],
     blur_px: f64,
+    grey_mask: bool,
 }
 
 impl Calibration {
@@ -84,15 +98,50 @@ impl Calibration {
         for (edge, pts) in Edge::ALL.iter().zip(points) {
             check_clicks(*edge, pts, w, h)?;
         }
+        let clicked = click_lines(points)?;
+        let polarity: [f64; 3] = [
+            side_polarity(Edge::Red, &clicked[RED], &clicks.red, reference)?,
+            side_polarity(Edge::Blue, &clicked[BLUE], &clicks.blue, reference)?,
+            side_polarity(Edge::Green, &clicked[GREEN], &clicks.green, reference)?,
+        ];
         let mut pyr = Pyramid::default();
         pyr.build(reference);
         let mut map = EdgeMap::default();
-        map.detect(&pyr, pyr.threshold(cfg.threshold));
-        let coarse = [
-            locate(Edge::Red, &clicks.red, reference, &pyr, &map)?,
-            locate(Edge::Blue, &clicks.blue, reference, &pyr, &map)?,
-            locate(Edge::Green, &clicks.green, reference, &pyr, &map)?,
-        ];
+        let threshold = pyr.threshold(cfg.threshold);
+        let locate_all = |map: &EdgeMap| -> Result<[Located; 3], VisionError> {
+            let mut out = [None; 3];
+            for e in 0..3 {
+                out[e] = Some(locate(
+                    Edge::ALL[e],
+                    points[e],
+                    clicked[e],
+                    polarity[e],
+                    &pyr,
+                    map,
+                )?);
+            }
+            Ok(out.map(|l| l.expect("every edge located")))
+        };
+        // A probe brighter than its background across every edge is looked for with the
+        // grey-level mask, as the tracker does; if that loses an edge (a bright
+        // background above the threshold), or the probe is darker across any edge, the
+        // edges are found without it.
+        let bright = polarity.iter().all(|&p| p > 0.0);
+        let mut masked = bright;
+        let coarse = if bright {
+            map.detect(&pyr, threshold);
+            match locate_all(&map) {
+                Ok(c) => c,
+                Err(first) => {
+                    masked = false;
+                    map.detect(&pyr, f32::NEG_INFINITY);
+                    locate_all(&map).map_err(|_| first)?
+                }
+            }
+        } else {
+            map.detect(&pyr, f32::NEG_INFINITY);
+            locate_all(&map)?
+        };
         let apex0 = coarse[BLUE]
             .line
             .intersect(&coarse[GREEN].line)
@@ -118,10 +167,29 @@ impl Calibration {
         let EdgeFits {
             lines,
             contrast,
+            level,
             turn_sigma,
             blur,
         } = fit_edges(reference, &second, blur)?;
+        for e in 0..3 {
+            if contrast[e] * polarity[e] <= 0.0 {
+                return Err(VisionError::EdgeNotFound {
+                    edge: Edge::ALL[e],
+                    reason: format!(
+                        "the grey-level fit finds the probe's side {} ({:+.1} grey levels), \
+                         the clicks' surroundings say {}",
+                        side_word(contrast[e]),
+                        contrast[e],
+                        side_word(polarity[e])
+                    ),
+                });
+            }
+        }
         let template = build_template(&lines, &coarse)?;
+        let grey_mask = masked
+            && (0..3).all(|e| {
+                level[e] + contrast[e] - f64::from(threshold) >= MASK_MARGIN * contrast[e]
+            });
         let edges = std::array::from_fn(|e| {
             let edge = &template.edges[e];
             let place = |tau| {
@@ -132,6 +200,7 @@ impl Calibration {
                 orientation_deg: orientation_deg(&lines[e]),
                 clicked_orientation_deg: orientation_deg(&coarse[e].clicked),
                 line: lines[e],
+                polarity: polarity[e],
                 segment_px: [place(edge.tip_tau), place(edge.far_tau)],
                 contrast: contrast[e],
                 orientation_sigma_deg: turn_sigma[e].to_degrees(),
@@ -142,7 +211,22 @@ impl Calibration {
             template,
             image_size: [w, h],
             blur_px: blur,
+            grey_mask,
         })
+    }
+
+    /// Whether the tracker applies its grey-level threshold as a mask on edge pixels
+    /// (their bright side must reach it): only for a probe brighter than its
+    /// background across every edge whose levels cleared the threshold on the
+    /// reference. A darker or low-contrast probe is found by its edges alone.
+    pub fn grey_mask(&self) -> bool {
+        self.grey_mask
+    }
+
+    /// +1 when the pyramid is brighter than its surroundings (its faces' contrasts,
+    /// summed), -1 when darker.
+    pub fn pyramid_polarity(&self) -> f64 {
+        (self.edges[BLUE].contrast + self.edges[GREEN].contrast).signum()
     }
 
     /// The calibrated edge.
@@ -174,6 +258,8 @@ impl Calibration {
 struct EdgeFits {
     lines: [Line; 3],
     contrast: [f64; 3],
+    /// Grey level just outside each edge.
+    level: [f64; 3],
     /// Standard errors of the lines' rotations, radians.
     turn_sigma: [f64; 3],
     blur: f64,
@@ -193,6 +279,7 @@ fn fit_edges(
         rho: 0.0,
     }; 3];
     let mut contrast = [0.0; 3];
+    let mut level = [0.0; 3];
     let mut turn_sigma = [0.0; 3];
     for e in 0..3 {
         let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
@@ -201,11 +288,13 @@ fn fit_edges(
         })?;
         lines[e] = r.line;
         contrast[e] = r.contrast;
+        level[e] = r.level;
         turn_sigma[e] = r.turn_sigma;
     }
     Ok(EdgeFits {
         lines,
         contrast,
+        level,
         turn_sigma,
         blur: fit.blur,
     })
@@ -279,14 +368,19 @@ struct Located {
     line: Line,
     /// Ends of the followed segment, frame pixels.
     ends: [[f64; 2]; 2],
+    /// +1: the probe's side is the brighter one; -1: the darker one.
+    polarity: f64,
 }
 
-/// Finds edge `edge` near its clicks: polarity, then the edge pixels along the clicked
-/// line, then the extent of the run of edge pixels that covers the clicks.
+/// Finds edge `edge` near its clicks (`clicked`: the line through them, its normal
+/// into the probe; `polarity`: which side is brighter): the edge pixels along the
+/// clicked line whose gradient points to the brighter side, then the extent of the run
+/// of edge pixels that covers the clicks.
 fn locate(
     edge: Edge,
     clicks: &[[f64; 2]],
-    img: &GrayImage,
+    clicked: Line,
+    polarity: f64,
     pyr: &Pyramid,
     map: &EdgeMap,
 ) -> Result<Located, VisionError> {
@@ -294,8 +388,7 @@ fn locate(
         edge,
         reason: reason.into(),
     };
-    let clicked = click_line(clicks, img)
-        .ok_or_else(|| not_found("no brighter side next to the clicked pixels"))?;
+    let gradient = scale(clicked.normal, polarity);
     // Clicks in detection coordinates, and the span they cover along the edge.
     let d = along(clicked.normal);
     let det: Vec<[f64; 2]> = clicks.iter().map(|&p| pyr.frame_to_detection(p)).collect();
@@ -316,20 +409,22 @@ fn locate(
         .map(|p| ([p.x as f64, p.y as f64], p.angle as f64))
         .filter(|&(q, a)| {
             det_line.depth(q).abs() <= CLICK_BAND_PX
-                && angle_gap(a, clicked.normal) < 0.35
+                && angle_gap(a, gradient) < 0.35
                 && (t_lo - pad..=t_hi + pad).contains(&dot(d, q))
         })
         .map(|(q, _)| q)
         .collect();
     if near.len() < 4 {
-        return Err(not_found(
-            "no edge pixels with the right polarity within 3 detection pixels of the clicks",
-        ));
+        return Err(not_found(&format!(
+            "no edge pixels with the probe {} within 3 detection pixels of the clicks",
+            side_word(polarity)
+        )));
     }
     let fitted = fit_points(&near, clicked.normal)
         .ok_or_else(|| not_found("edge pixels do not form a line"))?;
     // Follow the edge both ways from the clicks.
-    let angle = fitted.normal[1].atan2(fitted.normal[0]);
+    let towards_bright = scale(fitted.normal, polarity);
+    let angle = towards_bright[1].atan2(towards_bright[0]);
     let start = fitted.foot([
         0.5 * (det[0][0] + det[det.len() - 1][0]),
         0.5 * (det[0][1] + det[det.len() - 1][1]),
@@ -371,40 +466,101 @@ fn locate(
         clicked,
         line: frame_line,
         ends,
+        polarity,
     })
 }
 
-/// The line through the clicks, its normal turned towards the brighter side.
-fn click_line(clicks: &[[f64; 2]], img: &GrayImage) -> Option<Line> {
-    let n = clicks.len() as f64;
-    let c = [
-        clicks.iter().map(|p| p[0]).sum::<f64>() / n,
-        clicks.iter().map(|p| p[1]).sum::<f64>() / n,
-    ];
-    let normal = fit_points(clicks, [0.0, 1.0])?.normal;
+/// The lines through each edge's clicks, their normals turned into the probe by the
+/// geometry alone (the probe may be brighter or darker than its surroundings): blue's
+/// towards the green clicks and green's towards the blue ones (the pyramid lies between
+/// its faces), red's towards the apex where the clicked faces meet (the pyramid hangs
+/// below the beam's upper face).
+fn click_lines(points: [&Vec<[f64; 2]>; 3]) -> Result<[Line; 3], VisionError> {
+    let centroid = |pts: &[[f64; 2]]| {
+        let n = pts.len() as f64;
+        [
+            pts.iter().map(|p| p[0]).sum::<f64>() / n,
+            pts.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    };
+    let mut lines = [Line {
+        normal: [0.0, 1.0],
+        rho: 0.0,
+    }; 3];
+    for e in 0..3 {
+        let normal = fit_points(points[e], [0.0, 1.0])
+            .ok_or_else(|| VisionError::EdgeNotFound {
+                edge: Edge::ALL[e],
+                reason: "the clicked pixels do not form a line".into(),
+            })?
+            .normal;
+        lines[e] = Line::through(centroid(points[e]), normal);
+    }
+    let apex = lines[BLUE].intersect(&lines[GREEN]).ok_or_else(|| {
+        VisionError::Degenerate("the blue and green clicks lie on parallel lines".into())
+    })?;
+    let inside = [apex, centroid(points[GREEN]), centroid(points[BLUE])];
+    for e in 0..3 {
+        if lines[e].depth(inside[e]) < 0.0 {
+            lines[e] = Line::through(centroid(points[e]), scale(lines[e].normal, -1.0));
+        }
+    }
+    Ok(lines)
+}
+
+/// Which side of `line` (the clicks' line, normal into the probe) is brighter on the
+/// reference: +1 the probe's, -1 the outside. Sampled 3 to 6 px either side of every
+/// pixel along the clicked span; an error if the two sides differ by less than
+/// [`MIN_SIDE_CONTRAST`] grey levels on average.
+fn side_polarity(
+    edge: Edge,
+    line: &Line,
+    clicks: &[[f64; 2]],
+    img: &GrayImage,
+) -> Result<f64, VisionError> {
     let sample = |p: [f64; 2]| -> f64 {
         let x = p[0].round().clamp(0.0, (img.width() - 1) as f64) as u32;
         let y = p[1].round().clamp(0.0, (img.height() - 1) as f64) as u32;
         img.get_pixel(x, y)[0] as f64
     };
-    let mut diff = 0.0;
-    for &p in clicks {
-        for k in 3..6 {
+    let d = along(line.normal);
+    let n = line.normal;
+    let ts = clicks.iter().map(|&p| dot(d, p));
+    let t0 = ts.clone().fold(f64::INFINITY, f64::min);
+    let t1 = ts.fold(f64::NEG_INFINITY, f64::max);
+    let foot = line.foot(clicks[0]);
+    let t_foot = dot(d, foot);
+    let (mut diff, mut count) = (0.0f64, 0.0f64);
+    let mut t = t0;
+    while t <= t1 + 1e-9 {
+        let p = add(foot, scale(d, t - t_foot));
+        for k in 3..=6 {
             let k = k as f64;
-            diff += sample([p[0] + k * normal[0], p[1] + k * normal[1]])
-                - sample([p[0] - k * normal[0], p[1] - k * normal[1]]);
+            diff += sample(add(p, scale(n, k))) - sample(add(p, scale(n, -k)));
+            count += 1.0;
         }
+        t += 1.0;
     }
-    diff /= 3.0 * n;
-    if diff.abs() < 8.0 {
-        return None;
+    let diff = diff / count.max(1.0);
+    if diff.abs() < MIN_SIDE_CONTRAST {
+        return Err(VisionError::EdgeNotFound {
+            edge,
+            reason: format!(
+                "no contrast across the clicked pixels: the two sides differ by {diff:.1} \
+                 grey levels on average, at least {MIN_SIDE_CONTRAST} needed"
+            ),
+        });
     }
-    let normal = if diff > 0.0 {
-        normal
+    Ok(diff.signum())
+}
+
+/// "brighter" or "darker" for a sign.
+fn side_word(sign: f64) -> &'static str {
+    if sign > 0.0 {
+        "brighter"
     } else {
-        [-normal[0], -normal[1]]
-    };
-    Some(Line::through(c, normal))
+        "darker"
+    }
 }
 
 /// Total-least-squares line through points, normal oriented like `hint`.
@@ -488,6 +644,7 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         tip_tau: 0.0,
         far_tau: 0.0,
         far_open: false,
+        polarity: 1.0,
     }; 3];
     // The faces first: where they meet the beam tells which end of it is free.
     for e in [BLUE, GREEN, RED] {
@@ -520,16 +677,17 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
             far_tau,
             // The beam goes on to its clamp, whatever the reference showed of it.
             far_open: e == RED,
+            polarity: loc[e].polarity,
         };
     }
-    // Each side of the pyramid must have the other on its bright side.
+    // Each side of the pyramid must have the other on its probe side.
     let far_point = |e: usize| {
         let q = edges[e].point(edges[e].far_tau);
         [apex[0] + q[0], apex[1] + q[1]]
     };
     if lines[BLUE].depth(far_point(GREEN)) <= 0.0 || lines[GREEN].depth(far_point(BLUE)) <= 0.0 {
         return Err(degenerate(
-            "blue and green do not enclose a bright pyramid (check which edge is which)",
+            "blue and green do not enclose a pyramid (check which edge is which)",
         ));
     }
     // Blue is the back face (towards the clamp), green the front face (towards the free

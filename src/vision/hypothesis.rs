@@ -548,7 +548,9 @@ fn member_cover(
 /// the edge a pair hypothesis leaves out.
 fn walk(t: &Template, pose: &Pose, e: usize, edges: &EdgeMap) -> Coverage {
     let line = t.line(pose, e);
-    let normal_angle = line.normal[1].atan2(line.normal[0]);
+    // The gradient points to the brighter side: into the probe or out of it.
+    let polarity = t.edges[e].polarity;
+    let normal_angle = (polarity * line.normal[1]).atan2(polarity * line.normal[0]);
     let (tip, far) = segment(t, pose, e);
     let length = norm(sub(far, tip));
     if length < 1.0 {

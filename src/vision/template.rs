@@ -19,7 +19,7 @@ pub const GREEN: usize = 2;
 /// One edge of the template.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TemplateEdge {
-    /// Inward (towards the bright probe) unit normal in the reference, image coordinates.
+    /// Inward (towards the probe) unit normal in the reference, image coordinates.
     pub normal: [f64; 2],
     /// Signed offset of the line from the apex: `normal . (p - apex)` on the line.
     pub offset: f64,
@@ -31,6 +31,9 @@ pub struct TemplateEdge {
     pub far_tau: f64,
     /// Whether the far end is open (the edge went on out of the reference frame).
     pub far_open: bool,
+    /// +1 when the probe's side of the edge is the brighter one (its gradient points
+    /// along `normal`), -1 when the darker one (against it). Learned at calibration.
+    pub polarity: f64,
 }
 
 impl TemplateEdge {
@@ -121,9 +124,13 @@ impl Template {
         add(pose.apex, d)
     }
 
-    /// Inward normal angles (image radians) of the three edges in the reference.
-    pub fn normal_angles(&self) -> [f64; 3] {
-        self.edges.map(|e| e.normal[1].atan2(e.normal[0]))
+    /// Image angles (radians) of the three edges' gradients in the reference: towards
+    /// the brighter side, i.e. the inward normal turned by the edge's polarity.
+    pub fn gradient_angles(&self) -> [f64; 3] {
+        self.edges.map(|e| {
+            let g = scale(e.normal, e.polarity);
+            g[1].atan2(g[0])
+        })
     }
 }
 
@@ -143,6 +150,7 @@ mod tests {
             tip_tau,
             far_tau,
             far_open: false,
+            polarity: 1.0,
         };
         Template {
             edges: [

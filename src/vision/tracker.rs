@@ -166,18 +166,22 @@ impl Tracker {
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
         let template = *self.calibration.template();
         self.pyr.build(frame);
-        let threshold = self.pyr.threshold(self.threshold);
+        let threshold = if self.calibration.grey_mask() {
+            self.pyr.threshold(self.threshold)
+        } else {
+            f32::NEG_INFINITY
+        };
         self.edges.detect(&self.pyr, threshold);
         let (w, h) = (self.pyr.width, self.pyr.height);
         self.hough
-            .configure(w, h, self.window_rad, template.normal_angles());
+            .configure(w, h, self.window_rad, template.gradient_angles());
         self.hough.vote(&self.edges.points, self.edges.noise);
         self.hough.find_peaks();
         self.cands.build(
             &self.hough.peaks,
             &self.edges.points,
             &self.hough.voters,
-            template.normal_angles(),
+            template.gradient_angles(),
             [w, h],
         );
         let prior = match (self.coherence, self.last) {
@@ -339,8 +343,9 @@ impl Tracker {
             .iter()
             .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
         let margin = half_width(fit.blur);
-        let interior = verify::interior_median(frame, t, pose, margin)
-            .map_or(0.0, |m| verify::interior_position(fit, m));
+        let interior = verify::interior_median(frame, t, pose, margin).map_or(0.0, |m| {
+            verify::interior_position(fit, m, self.calibration.pyramid_polarity())
+        });
         let evidence = Evidence {
             coverage: if vis > 0.0 { sup / vis } else { 0.0 },
             contrast_ratio: verify::contrast_ratio(fit, &in_view, &calibrated),

@@ -66,7 +66,9 @@ pub fn contrast_ratio(fit: &FitResult, in_view: &[bool; 3], calibrated: &[f64; 3
         if !in_view[e] {
             continue;
         }
-        let r = fit.edges[e].map_or(0.0, |r| r.contrast / calibrated[e].max(1.0));
+        // Signed: a darker probe's edges have negative contrasts.
+        let scale = calibrated[e].abs().max(1.0).copysign(calibrated[e]);
+        let r = fit.edges[e].map_or(0.0, |r| r.contrast / scale);
         ratio = ratio.min(r);
     }
     if ratio.is_finite() {
@@ -142,17 +144,18 @@ pub fn interior_median(frame: &GrayImage, t: &Template, pose: &Pose, margin: f64
 }
 
 /// Where `median` lies between the fitted outside and inside levels of the edges, 0 to 1
-/// (0 when there is no usable edge).
-pub fn interior_position(fit: &FitResult, median: f64) -> f64 {
+/// (0 when there is no usable edge); `polarity` is the calibrated pyramid's (+1
+/// brighter than its surroundings, -1 darker), and only edges of that polarity count.
+pub fn interior_position(fit: &FitResult, median: f64, polarity: f64) -> f64 {
     let (mut outside, mut inside, mut n) = (0.0, 0.0, 0.0);
     for r in fit.edges.iter().flatten() {
-        if r.contrast > 0.0 {
+        if r.contrast * polarity > 0.0 {
             outside += r.level;
             inside += r.level + r.contrast;
             n += 1.0;
         }
     }
-    if n == 0.0 || inside <= outside {
+    if n == 0.0 || (inside - outside) * polarity <= 0.0 {
         return 0.0;
     }
     (median - outside / n) / ((inside - outside) / n)

@@ -212,7 +212,7 @@ pub mod rendered {
     use super::Truth;
     use image::GrayImage;
     use nanoforce::config::{CalibrationConfig, TrackerConfig};
-    use nanoforce::scene::{render, render_into, Segment, Session};
+    use nanoforce::scene::{render, render_into, render_over_into, Segment, Session};
     use nanoforce::vision::{Calibration, Estimate, Tracker};
 
     /// The tracker settings and calibration clicks the session's probe.toml would hold.
@@ -273,9 +273,14 @@ pub mod rendered {
     }
 
     pub fn calibrate(session: &Session) -> (TrackerConfig, Calibration) {
+        calibrate_over(session, &[])
+    }
+
+    /// As [`calibrate`], the reference rendered over `crops` (real backgrounds).
+    pub fn calibrate_over(session: &Session, crops: &[GrayImage]) -> (TrackerConfig, Calibration) {
         let cfg = tracker_config(session);
         let mut reference = GrayImage::new(1, 1);
-        render_into(&session.reference, &mut reference);
+        render_over_into(&session.reference, crops, &mut reference);
         let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
             .expect("rendered reference calibrates");
         (cfg, cal)
@@ -337,6 +342,58 @@ pub mod rendered {
                 magnification: t.magnification,
                 style: spec.look.style_name.to_string(),
             });
+        }
+        (truths, estimates)
+    }
+
+    /// The real-background crops of `tests/data/real-sem`, in name order.
+    pub fn real_crops() -> Vec<GrayImage> {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-sem");
+        let mut paths: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "png"))
+            .collect();
+        paths.sort();
+        paths
+            .iter()
+            .map(|p| {
+                image::open(p)
+                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+                    .to_luma8()
+            })
+            .collect()
+    }
+
+    /// Renders every frame of each session over `crops` and tracks it with a tracker
+    /// calibrated on the session's own reference (rendered over the same crops).
+    pub fn run_all_over(sessions: &[Session], crops: &[GrayImage]) -> (Vec<Truth>, Vec<Estimate>) {
+        let (mut truths, mut estimates) = (Vec::new(), Vec::new());
+        for s in sessions {
+            let cfg = tracker_config(s);
+            let mut reference = GrayImage::new(1, 1);
+            render_over_into(&s.reference, crops, &mut reference);
+            let cal =
+                Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
+                    .unwrap_or_else(|err| {
+                        panic!("session {}: reference: {err}", s.reference.look.style_name)
+                    });
+            let mut tracker = Tracker::new(&cfg, cal, Some(s.probe().cantilever()));
+            tracker.set_coherence(false);
+            let mut frame = GrayImage::new(1, 1);
+            for (k, spec) in s.frames.iter().enumerate() {
+                let t = render_over_into(spec, crops, &mut frame);
+                estimates.push(tracker.track(&frame));
+                truths.push(Truth {
+                    frame: format!("frame_{k:05}"),
+                    detected: t.probe_in_view,
+                    angle_deg: t.angle_deg,
+                    force_nn: t.force_nn,
+                    tip: [t.tip_x, t.tip_y],
+                    magnification: t.magnification,
+                    style: spec.look.style_name.to_string(),
+                });
+            }
         }
         (truths, estimates)
     }
