@@ -16,6 +16,7 @@
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of
 //! the bent beam is [`crate::model`]'s exact elastica; nothing here duplicates it.
+pub mod adversarial;
 mod background;
 mod blur;
 mod clutter;

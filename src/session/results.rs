@@ -32,12 +32,7 @@ pub fn header(timing: bool) -> String {
 
 /// Why there is no estimate, as written in the `miss` column.
 pub fn miss_name(miss: Option<Miss>) -> &'static str {
-    match miss {
-        None => "",
-        Some(Miss::NoCandidates) => "no-candidates",
-        Some(Miss::Inconsistent) => "inconsistent",
-        Some(Miss::LowConfidence) => "low-confidence",
-    }
+    miss.map_or("", Miss::name)
 }
 
 /// One row for a tracked frame; `sem` is the frame's metadata (may be empty).
@@ -236,6 +231,34 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_refusal_has_its_own_miss_name() {
+        use crate::vision::Edge;
+        let mut misses = vec![
+            Miss::NoCandidates,
+            Miss::Inconsistent,
+            Miss::ApexOutside,
+            Miss::RotationOutside,
+            Miss::ScaleMismatch,
+            Miss::LowConfidence,
+        ];
+        for e in Edge::ALL {
+            misses.extend([Miss::EdgeMissing(e), Miss::WrongAppearance(e)]);
+        }
+        let names: std::collections::BTreeSet<&str> =
+            misses.iter().map(|&m| miss_name(Some(m))).collect();
+        assert_eq!(names.len(), misses.len(), "{names:?}");
+        assert_eq!(
+            miss_name(Some(Miss::EdgeMissing(Edge::Green))),
+            "edge-missing-green"
+        );
+        assert_eq!(
+            miss_name(Some(Miss::RotationOutside)),
+            "rotation-outside-window"
+        );
+        assert_eq!(miss_name(None), "");
+    }
 
     #[test]
     fn undetected_rows_have_empty_values() {

@@ -99,15 +99,58 @@ pub struct EdgeFit {
     pub contrast: f64,
 }
 
-/// Why a frame gave no estimate.
+/// Why a frame gave no estimate (docs/tracker.md, "What the tracker refuses, and why").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Miss {
     /// Too few edge candidates of the tip's polarity and orientation.
     NoCandidates,
     /// Candidates exist, but none combine into a rigid tip.
     Inconsistent,
-    /// A tip-like hypothesis was found but did not pass verification.
+    /// The placed tip's apex lies outside the frame: the tip is out of view.
+    ApexOutside,
+    /// The rotation lies outside the search window (`window_deg`) by more than its
+    /// standard error allows.
+    RotationOutside,
+    /// An edge the pose puts in view is not there along its predicted length (or not
+    /// at its corner: the tip hidden).
+    EdgeMissing(Edge),
+    /// An edge in view steps the wrong way (the probe's calibrated polarity), with a
+    /// contrast unlike the calibrated one, or bounds a body unlike the probe's.
+    WrongAppearance(Edge),
+    /// The edges do not end where the calibrated geometry at this scale puts them: a
+    /// face running short or on, or the beam's lower face not at its calibrated
+    /// thickness.
+    ScaleMismatch,
+    /// A tip-like hypothesis passed every check above but its combined confidence is
+    /// too low.
     LowConfidence,
+}
+
+impl Miss {
+    /// The name written in result files (`miss` column).
+    pub fn name(self) -> &'static str {
+        use Edge::{Blue, Green, Red};
+        match self {
+            Miss::NoCandidates => "no-candidates",
+            Miss::Inconsistent => "inconsistent",
+            Miss::ApexOutside => "apex-outside",
+            Miss::RotationOutside => "rotation-outside-window",
+            Miss::EdgeMissing(Red) => "edge-missing-red",
+            Miss::EdgeMissing(Blue) => "edge-missing-blue",
+            Miss::EdgeMissing(Green) => "edge-missing-green",
+            Miss::WrongAppearance(Red) => "wrong-appearance-red",
+            Miss::WrongAppearance(Blue) => "wrong-appearance-blue",
+            Miss::WrongAppearance(Green) => "wrong-appearance-green",
+            Miss::ScaleMismatch => "scale-mismatch",
+            Miss::LowConfidence => "low-confidence",
+        }
+    }
+}
+
+impl fmt::Display for Miss {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// What the tracker reports for one frame.

@@ -35,6 +35,12 @@ const COHERENT_TOL_RAD: f64 = 0.07;
 /// final fit when two others hold (a particle or scratch sitting on it).
 const DROP_CONTRAST_RATIO: f64 = 0.4;
 
+/// A rotation is outside the window when it lies beyond it by more than this many of
+/// its standard errors plus [`WINDOW_SLACK_RAD`]: a tip turned exactly to the window's
+/// edge is measured either side of it.
+const WINDOW_SIGMAS: f64 = 3.0;
+const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
+
 /// Per-edge flags.
 type Vec3Mask = [bool; 3];
 
@@ -325,6 +331,21 @@ impl Tracker {
         Some((pose, fit, bands))
     }
 
+    /// Why a refined tip is not this probe's, if it is not: the apex outside the
+    /// frame, or the rotation outside the window (beyond its standard error).
+    fn refusal(&self, frame: &GrayImage, pose: &Pose, fit: &FitResult) -> Option<Miss> {
+        let [x, y] = pose.apex;
+        let (w, h) = (frame.width() as f64, frame.height() as f64);
+        if !(x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0) {
+            return Some(Miss::ApexOutside);
+        }
+        let beyond = pose.psi.abs() - self.window_rad;
+        if beyond > WINDOW_SIGMAS * fit.turn_sigma + WINDOW_SLACK_RAD {
+            return Some(Miss::RotationOutside);
+        }
+        None
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn verdict(
         &mut self,
@@ -336,6 +357,9 @@ impl Tracker {
         bands: &[Option<Band>; 3],
     ) -> Estimate {
         let size = [frame.width() as f64, frame.height() as f64];
+        if let Some(miss) = self.refusal(frame, pose, fit) {
+            return Estimate::missed(miss, 0.0);
+        }
         let in_view = bands.map(|b| b.is_some());
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
         let (sup, vis) = hyp

@@ -2,6 +2,9 @@
 //!
 //! A wrong force is worse than none, so a detection must pass checks that clutter
 //! cannot pass by chance, beyond the rigid geometry the search already enforced:
+//! - the apex lies in the frame and the rotation inside the search window (the
+//!   tracker refuses those first, naming the reason: `Miss::ApexOutside`,
+//!   `Miss::RotationOutside`);
 //! - every edge the pose puts in view must be there, with a contrast comparable to the
 //!   calibrated one (a scratch is a tenth as bright as the probe, a missing edge has
 //!   none);

@@ -1,0 +1,201 @@
+//! The tracker on frames that do not show the session's probe: how many it detects
+//! (the goal is none).
+//!
+//! Six kinds of probe-less frames (docs/tracker.md, "What the tracker refuses, and
+//! why"), generated from a seed for sessions of the rendered suite, each tracked by a
+//! tracker calibrated on its session's reference: clutter (scratches and particles),
+//! random bright and dark shapes, the session's probe mirrored left-right, probes of
+//! another geometry, the probe with its tip under an occluding patch
+//! (`nanoforce::scene::adversarial`), and sub-windows of real SEM frames
+//! (`tests/data/real-sem`). The checked-in seed is a held-out one: the checks were
+//! developed on another (`ADVERSARIAL_SEED=n` runs any). Run with
+//! `cargo test --release --test tracker_adversarial -- --nocapture`.
+mod tracker_support;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use image::GrayImage;
+use nanoforce::scene::adversarial::{Adversary, Decoy};
+use nanoforce::scene::rng::{sub_seed, Rng};
+use nanoforce::scene::{self, Session};
+use nanoforce::vision::{Estimate, Tracker};
+use tracker_support::rendered;
+
+/// Sessions of the suite the frames are made for, and frames per session and kind.
+const SESSIONS: usize = 6;
+const FRAMES_PER_KIND: usize = 30;
+
+/// The real SEM crops, as 8-bit grey images.
+fn real_sem() -> Vec<GrayImage> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-sem");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "png"))
+        .collect();
+    paths.sort();
+    paths
+        .iter()
+        .map(|p| {
+            image::open(p)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+                .to_luma8()
+        })
+        .collect()
+}
+
+/// A random sub-window (half to all of a crop, 4:3), flipped at random, resized to the
+/// session's frame size.
+fn real_frame(crops: &[GrayImage], width: u32, height: u32, rng: &mut Rng) -> GrayImage {
+    let crop = &crops[rng.int(0, crops.len() as u32 - 1) as usize];
+    let (cw, ch) = crop.dimensions();
+    let share = rng.uniform(0.5, 1.0);
+    let w = ((cw as f64 * share) as u32).min(ch * 4 / 3).max(64);
+    let h = (w * 3 / 4).min(ch);
+    let x = rng.int(0, cw - w);
+    let y = rng.int(0, ch - h);
+    let mut window = image::imageops::crop_imm(crop, x, y, w, h).to_image();
+    if rng.chance(0.5) {
+        image::imageops::flip_horizontal_in_place(&mut window);
+    }
+    if rng.chance(0.5) {
+        image::imageops::flip_vertical_in_place(&mut window);
+    }
+    image::imageops::resize(
+        &window,
+        width,
+        height,
+        image::imageops::FilterType::Triangle,
+    )
+}
+
+/// Per kind: frames, detections (with their description), largest confidence, and the
+/// count of each miss reason.
+#[derive(Default)]
+struct Tally {
+    frames: usize,
+    detected: Vec<String>,
+    max_confidence: f64,
+    reasons: BTreeMap<String, usize>,
+}
+
+impl Tally {
+    fn add(&mut self, what: String, e: &Estimate) {
+        self.frames += 1;
+        self.max_confidence = self.max_confidence.max(e.confidence);
+        if e.detected {
+            self.detected.push(format!(
+                "{what}: angle {:?} apex {:?} scale {:?} conf {:.2}",
+                e.angle_deg, e.apex_px, e.scale, e.confidence
+            ));
+        }
+        let reason = e.miss.map_or("detected".to_string(), |m| format!("{m:?}"));
+        *self.reasons.entry(reason).or_default() += 1;
+    }
+}
+
+fn run(seed: u64) -> BTreeMap<&'static str, Tally> {
+    let sessions = scene::suite(seed, SESSIONS, 1);
+    let crops = real_sem();
+    let mut adversary = Adversary::new();
+    let mut frame = GrayImage::new(1, 1);
+    let mut tallies: BTreeMap<&'static str, Tally> = BTreeMap::new();
+    for (i, session) in sessions.iter().enumerate() {
+        let mut tracker: Tracker = rendered::tracker(session, false);
+        for decoy in Decoy::ALL {
+            for k in 0..FRAMES_PER_KIND {
+                let frame_seed = sub_seed(seed, (1000 * i + 100 * decoy as usize + k) as u64);
+                let spec = adversary.render_into(session, decoy, frame_seed, &mut frame);
+                let e = tracker.track(&frame);
+                let what = format!(
+                    "session {i} frame {k} ({} {}x {:.1} deg)",
+                    spec.look.style_name, spec.magnification, spec.angle_deg
+                );
+                tallies.entry(decoy.name()).or_default().add(what, &e);
+            }
+        }
+        let mut rng = Rng::new(sub_seed(seed, 7000 + i as u64));
+        let (w, h) = (session.reference.width, session.reference.height);
+        for k in 0..FRAMES_PER_KIND {
+            let real = real_frame(&crops, w, h, &mut rng);
+            let e = tracker.track(&real);
+            tallies
+                .entry("real-sem")
+                .or_default()
+                .add(format!("session {i} frame {k}"), &e);
+        }
+    }
+    tallies
+}
+
+fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
+    let mut out = String::new();
+    for (kind, t) in tallies {
+        out += &format!(
+            "{kind}: {} frames, {} detected, largest confidence {:.3}, {:?}\n",
+            t.frames,
+            t.detected.len(),
+            t.max_confidence,
+            t.reasons
+        );
+        for d in &t.detected {
+            out += &format!("  {d}\n");
+        }
+    }
+    out
+}
+
+/// False detections per kind measured on the held-out seed 2027 (1080 frames) with
+/// today's checks. The goal is none on any kind (docs/tracker.md, "What the tracker
+/// refuses, and why"); until the per-edge checks land, these bounds catch a regression
+/// and a kind that reaches zero stays there.
+const MEASURED: [(&str, usize); 6] = [
+    ("clutter", 0),
+    ("mirrored", 43),
+    ("occluded", 106),
+    ("other-probe", 119),
+    ("real-sem", 2),
+    ("shapes", 4),
+];
+
+#[test]
+fn false_detections_without_the_probe_stay_within_the_measured_bounds() {
+    let seed = std::env::var("ADVERSARIAL_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2027);
+    let tallies = run(seed);
+    let why = report(&tallies);
+    println!("seed {seed}\n{why}");
+    let frames: usize = tallies.values().map(|t| t.frames).sum();
+    assert!(frames >= 1000, "{frames} frames");
+    assert_eq!(tallies.len(), Decoy::ALL.len() + 1, "{why}");
+    if seed != 2027 {
+        return;
+    }
+    for (kind, bound) in MEASURED {
+        let found = tallies.get(kind).map_or(usize::MAX, |t| t.detected.len());
+        assert!(found <= bound, "{kind}: {found} > {bound}\n{why}");
+    }
+}
+
+#[test]
+fn the_decoys_are_probe_like() {
+    // The generator does what it says: a mirrored frame is the probe's frame flipped,
+    // and frames differ from seed to seed but not from run to run.
+    let session: Session = scene::suite(5, 1, 1).remove(0);
+    let mut adversary = Adversary::new();
+    let (mut a, mut b) = (GrayImage::new(1, 1), GrayImage::new(1, 1));
+    for decoy in Decoy::ALL {
+        adversary.render_into(&session, decoy, 11, &mut a);
+        adversary.render_into(&session, decoy, 11, &mut b);
+        assert_eq!(a, b, "{}", decoy.name());
+        adversary.render_into(&session, decoy, 12, &mut b);
+        assert_ne!(a, b, "{}", decoy.name());
+    }
+    let spec = adversary.render_into(&session, Decoy::Mirrored, 3, &mut a);
+    let (mut probe, _) = scene::render(&spec);
+    image::imageops::flip_horizontal_in_place(&mut probe);
+    assert_eq!(a, probe);
+}
