@@ -16,6 +16,7 @@
 //!   grey levels, with a bend term for the curved beam edge;
 //! - `verify`: is it the tip (contrast of every edge in view, a bright pyramid, a
 //!   precise rotation), and the confidence;
+//! - `sigma`: the reported standard error of the rotation, calibrated on rendered suites;
 //! - `tracker`: the per-frame driver and coherence;
 //! - `calibration`: the template learned from the reference image and clicked pixels;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
@@ -33,6 +34,7 @@ mod hypothesis;
 mod overlay;
 mod pyramid;
 mod refine;
+mod sigma;
 mod simd;
 mod template;
 mod tracker;
