@@ -5,8 +5,8 @@
 //! the inverse of the weighted normal matrix, with the calibration's share (each edge's
 //! orientation error on the reference, which the fit ties the edges by) added in
 //! quadrature. Two things that formula leaves out make it a little low:
-//! - **The robust weights.** The fit weighs residuals beyond [`HUBER_NOISES`] times its
-//!   measured noise down (Huber), and measures the noise as the RMS of the weighted
+//! - **The robust weights.** The fit weighs residuals beyond 1.5 times its measured
+//!   noise down (Huber), and measures the noise as the RMS of the weighted
 //!   residuals. On Gaussian noise that measured noise settles at 0.93 of the true one,
 //!   and the formula `noise^2 (J'WJ)^-1` gives 0.90 (J'J)^-1 where the M-estimator's
 //!   actual variance is `E[psi^2] / E[psi']^2 (J'J)^-1` = 1.05 (J'J)^-1: the standard
@@ -26,13 +26,11 @@
 //! `tests/tracker_sigma.rs`; docs/tracker.md, "Uncertainty and confidence", has the
 //! numbers.
 
-/// The fit's Huber threshold, in units of its measured noise (`refine`'s kernel).
-const HUBER_NOISES: f64 = 1.5;
 /// The model floor, degrees (see the module documentation).
 pub const FLOOR_DEG: f64 = 0.0013;
 
 /// How much the normal equations' standard error of a Huber fit with threshold
-/// [`HUBER_NOISES`] times its own weighted-RMS noise understates the true one on
+/// 1.5 times its own weighted-RMS noise understates the true one on
 /// Gaussian noise: 1.079 (the closed form of the module documentation, checked against
 /// a numerical integration in the tests).
 pub const fn huber_factor() -> f64 {
@@ -48,6 +46,9 @@ pub fn angle_sigma_deg(turn_sigma_rad: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fit's Huber threshold, in units of its measured noise (`refine`'s kernel).
+    const HUBER_NOISES: f64 = 1.5;
 
     /// Standard normal density and the integral of `f` over [a, b] (midpoint rule).
     fn phi(x: f64) -> f64 {
