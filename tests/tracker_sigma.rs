@@ -64,7 +64,8 @@ fn calibration(z: &[f64]) -> (f64, f64) {
     } else {
         a[a.len() / 2]
     };
-    let beyond = a.iter().filter(|&&z| !(z <= 4.0)).count() as f64 / a.len().max(1) as f64;
+    let beyond =
+        a.iter().filter(|&&z| z.is_nan() || z > 4.0).count() as f64 / a.len().max(1) as f64;
     (median, beyond)
 }
 

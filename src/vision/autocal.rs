@@ -525,9 +525,9 @@ fn otsu(hist: &[u64; 256], from: usize) -> usize {
     let total: f64 = hist[from..].iter().map(|&c| c as f64).sum();
     let sum: f64 = (from..256).map(|i| i as f64 * hist[i] as f64).sum();
     let (mut w0, mut s0, mut best, mut level) = (0.0, 0.0, -1.0, from);
-    for i in from..256 {
-        w0 += hist[i] as f64;
-        s0 += i as f64 * hist[i] as f64;
+    for (i, &count) in hist.iter().enumerate().skip(from) {
+        w0 += count as f64;
+        s0 += i as f64 * count as f64;
         let w1 = total - w0;
         if w0 == 0.0 || w1 == 0.0 {
             continue;
