@@ -181,3 +181,60 @@ fn the_overlay_never_overwrites_the_image() {
         );
     }
 }
+
+/// The refined orientation of each edge in a printed block, degrees.
+fn refined(block: &str) -> Vec<f64> {
+    ["red", "blue", "green"]
+        .iter()
+        .map(|edge| {
+            let line = block
+                .lines()
+                .find(|l| l.starts_with(&format!("#   {edge} ")))
+                .unwrap_or_else(|| panic!("no refined {edge}: {block}"));
+            line.split_whitespace().nth(2).unwrap().parse().unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn auto_calibration_prints_the_block_the_clicks_give() {
+    let dir = tempfile::tempdir().unwrap();
+    let overlay = dir.path().join("auto.png");
+    let hand = calibrate(dir.path(), &["--overlay", overlay.to_str().unwrap()]);
+    let hand = refined(&String::from_utf8(hand.stdout).unwrap());
+    let run = |extra: &[&str]| {
+        Command::new(BIN)
+            .arg("calibrate")
+            .arg("--image")
+            .arg(dir.path().join("reference.png"))
+            .args(["--overlay", overlay.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // One click near the apex, and none (the probe enters from the left).
+    for extra in [&["--auto", "--apex", "271,214"][..], &["--auto"][..]] {
+        std::fs::remove_file(&overlay).ok();
+        let out = run(extra);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{extra:?}: {err}");
+        let block = String::from_utf8(out.stdout).unwrap();
+        assert!(block.starts_with("[tracker.calibration]\n"), "{block}");
+        for key in ["red = [[", "blue = [[", "green = [["] {
+            assert!(block.contains(key), "{key}: {block}");
+        }
+        for (a, h) in refined(&block).iter().zip(&hand) {
+            assert!((a - h).abs() <= 0.01, "{extra:?}: {a} against {h}\n{block}");
+        }
+        assert!(image::open(&overlay).is_ok(), "overlay written");
+    }
+    let out = run(&["--auto", "--apex", "600,300"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("auto-calibration: ") && err.contains("not found near the apex"),
+        "{err}"
+    );
+    let out = run(&["--auto", "--red", "1,2", "3,4"]);
+    assert!(!out.status.success(), "--auto with clicks is refused");
+}

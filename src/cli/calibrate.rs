@@ -8,7 +8,7 @@ use clap::Args;
 
 use crate::config::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
 use crate::session::frames::load_gray;
-use crate::vision::{draw_calibration, Calibration, Edge};
+use crate::vision::{auto_calibrate, draw_calibration, Calibration, Edge};
 
 /// Refine clicked tip edges on a reference frame; print the calibration block.
 #[derive(Debug, Args)]
@@ -24,24 +24,36 @@ Clicks are off by up to a pixel, which would put each edge's orientation off by 
 a degree; calibrate refines every edge on the image's grey levels. It prints the \
 [tracker.calibration] block for probe.toml (the clicks, with the refined orientations \
 as comments) and writes an overlay PNG with the refined edges in red, blue and green and \
-the apex marked: look at it before a session.",
+the apex marked: look at it before a session.\n\n\
+With --auto, calibrate finds the three edges itself, from one pixel on or near the apex \
+(--apex X,Y), or, when the probe is the dominant body entering from a frame side, from \
+none; the block it prints holds the points it found on each edge as clicks. Check the \
+overlay all the more.",
     after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
 --red 156.8,33.4 228.3,57.3 --blue 230.7,114.2 260.6,192.0 --green 282.5,199.8 314.8,142.9 \\\n      \
---overlay calibration.png >> probe.toml"
+--overlay calibration.png >> probe.toml\n  \
+nanoforce calibrate --image reference.png --auto --apex 270,214 >> probe.toml"
 )]
 pub struct CalibrateArgs {
     /// The reference frame (PNG, TIFF or PGM).
     #[arg(long, value_name = "FILE")]
     pub image: PathBuf,
     /// Pixels on the red edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
     pub red: Vec<[f64; 2]>,
     /// Pixels on the blue edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
     pub blue: Vec<[f64; 2]>,
     /// Pixels on the green edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required = true, value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
     pub green: Vec<[f64; 2]>,
+    /// Find the three edges automatically: from the pixel given by --apex, or without
+    /// it when the probe is the dominant body entering from a frame side.
+    #[arg(long, conflicts_with_all = ["red", "blue", "green"])]
+    pub auto: bool,
+    /// A pixel on or near the apex (blue meets green), as X,Y, for --auto.
+    #[arg(long, value_name = "X,Y", requires = "auto", value_parser = parse_point)]
+    pub apex: Option<[f64; 2]>,
     /// Where to write the overlay (default: calibration-overlay.png beside the image).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
@@ -98,12 +110,6 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         );
     }
     let reference = load_gray(&args.image)?;
-    let clicks = CalibrationConfig {
-        reference_image: args.image.clone(),
-        red: args.red,
-        blue: args.blue,
-        green: args.green,
-    };
     if !(args.window_deg.is_finite() && args.window_deg > 0.0 && args.window_deg <= 45.0) {
         anyhow::bail!("--window-deg must be in (0, 45], got {}", args.window_deg);
     }
@@ -113,9 +119,29 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         ..TrackerConfig::default()
     };
     let origin = args.pixel_origin;
-    let clicked = clicks.clone().counted_from(origin);
-    let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
-        .with_context(|| format!("calibrating on {}", args.image.display()))?;
+    let (clicks, calibration) = if args.auto {
+        let apex = args.apex.map(|p| origin.input(p));
+        let (found, calibration) = auto_calibrate(&reference, apex, &tracker)
+            .with_context(|| format!("calibrating on {}", args.image.display()))?;
+        let mut clicks = found.config(args.image.clone());
+        for points in [&mut clicks.red, &mut clicks.blue, &mut clicks.green] {
+            for p in points.iter_mut() {
+                *p = origin.output(*p);
+            }
+        }
+        (clicks, calibration)
+    } else {
+        let clicks = CalibrationConfig {
+            reference_image: args.image.clone(),
+            red: args.red,
+            blue: args.blue,
+            green: args.green,
+        };
+        let clicked = clicks.clone().counted_from(origin);
+        let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
+            .with_context(|| format!("calibrating on {}", args.image.display()))?;
+        (clicks, calibration)
+    };
     print!("{}", calibration_block(&clicks, &calibration, origin));
     draw_calibration(&reference, &calibration)
         .save(&overlay_path)

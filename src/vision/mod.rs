@@ -16,13 +16,17 @@
 //!   grey levels, with a bend term for the curved beam edge;
 //! - `verify`: is it the tip (contrast of every edge in view, a bright pyramid, a
 //!   precise rotation), and the confidence;
+//! - `sigma`: the reported standard error of the rotation, calibrated on rendered suites;
 //! - `tracker`: the per-frame driver and coherence;
 //! - `calibration`: the template learned from the reference image and clicked pixels;
+//! - `autocal`: the three edges found from one click on the apex (or none), for
+//!   calibration;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
 //!
 //! Conventions are scene.md's: pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
 
+mod autocal;
 mod bands;
 mod calibration;
 mod candidates;
@@ -33,6 +37,7 @@ mod hypothesis;
 mod overlay;
 mod pyramid;
 mod refine;
+mod sigma;
 mod simd;
 mod template;
 mod tracker;
@@ -42,6 +47,7 @@ use std::fmt;
 
 use crate::config::PixelOrigin;
 
+pub use autocal::{auto_calibrate, clicks_from_apex, find_apex, AutoCalError, AutoClicks};
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
 pub use overlay::{draw_calibration, draw_overlay};

@@ -402,7 +402,7 @@ impl Tracker {
             force_saturated: force.is_some_and(|f| f.saturated),
             apex_px: Some(t.true_apex(pose, self.edge_bias_px)),
             edges,
-            angle_sigma_deg: Some(fit.turn_sigma.to_degrees()),
+            angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_sigma)),
             scale: Some(pose.scale),
             confidence,
             miss: None,

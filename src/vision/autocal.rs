@@ -1,0 +1,654 @@
+//! Automatic calibration: the three tip edges found in the reference image from one
+//! click on the apex (or, when the probe is the dominant body entering from a frame
+//! side, from none), as points on each edge that then go through the ordinary
+//! calibration ([`Calibration::from_reference`]). The result is a calibration like any
+//! other: the same block printed, the same overlay for a person to confirm.
+//!
+//! From the apex:
+//! 1. On a ring around it the pyramid is the one arc that stands out from the rest (of
+//!    either polarity): its two ends are the two faces' directions.
+//! 2. Each face is traced outward with profiles across it, the edge at the crossing of
+//!    the mid level, until its step fades (where the face meets the beam); a line
+//!    through the crossings.
+//! 3. Along the pyramid's axis the probe ends at the beam's upper face (red). Its
+//!    direction is the one along which the step is strongest; it is traced both ways.
+//! 4. The beam runs much further one way (to the clamp, usually out of the frame) than
+//!    the other (the free end): the face on the clamp's side is the back face (blue),
+//!    the other the front face (green).
+//!
+//! Without a click, the apex is the point of the largest body touching a frame side
+//! (grey levels above Otsu's level, or above the level splitting the bright class, the
+//! probe being the brightest) farthest from its beam's axis.
+
+use std::collections::VecDeque;
+
+use image::GrayImage;
+
+use super::geometry::{add, dot, norm, scale, sub, Line};
+use super::{Calibration, VisionError};
+use crate::config::{CalibrationConfig, TrackerConfig};
+
+/// Radius of the ring around the apex on which the pyramid's arc is found, pixels.
+const RING_PX: f64 = 10.0;
+/// Angular samples on the ring.
+const RING_SAMPLES: usize = 720;
+/// Narrowest and widest pyramid arc, degrees.
+const ARC_DEG: (f64, f64) = (8.0, 150.0);
+/// A profile across an edge: its levels averaged between these depths (pixels) on
+/// each side, the crossing searched within the outer one.
+const LEVEL_PX: (f64, f64) = (1.5, 4.0);
+/// Where the faces' tracing starts, pixels from the apex (the wedge is narrow nearer).
+const FACE_START_PX: f64 = 6.0;
+/// A profile counts while its step is at least this share of the edge's first steps;
+/// the tracing stops after [`MISSES`] profiles in a row that do not.
+const STEP_SHARE: f64 = 0.5;
+const MISSES: usize = 3;
+/// A crossing this far from the traced line is not taken, pixels.
+const MAX_CROSSING_PX: f64 = 2.5;
+/// Crossings this far from the line fitted to them are another edge (a face turning
+/// into the beam at a corner), pixels.
+const INLIER_PX: f64 = 0.75;
+/// Shortest edge traced, pixels.
+const MIN_EDGE_PX: f64 = 5.0;
+/// Half-length (pixels) over which a direction of the red edge is scored.
+const RED_SCORE_PX: f64 = 20.0;
+
+/// Why the edges could not be found.
+#[derive(Debug, thiserror::Error)]
+pub enum AutoCalError {
+    #[error("auto-calibration: {edges} not found near the apex ({reason})")]
+    NotFound { edges: &'static str, reason: String },
+    #[error("auto-calibration: no probe entering from a frame side ({0}); give --apex X,Y")]
+    NoProbe(String),
+    #[error("auto-calibration: {0}")]
+    Calibration(#[from] VisionError),
+}
+
+/// Three points on each edge, found from the apex (frame pixels, scene.md's origin).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AutoClicks {
+    pub red: Vec<[f64; 2]>,
+    pub blue: Vec<[f64; 2]>,
+    pub green: Vec<[f64; 2]>,
+}
+
+impl AutoClicks {
+    /// The clicks as `[tracker.calibration]` holds them.
+    pub fn config(&self, reference_image: std::path::PathBuf) -> CalibrationConfig {
+        CalibrationConfig {
+            reference_image,
+            red: self.red.clone(),
+            blue: self.blue.clone(),
+            green: self.green.clone(),
+        }
+    }
+}
+
+/// Finds the edges from `apex` (or, if `None`, from the probe entering from a side)
+/// and calibrates on them.
+pub fn auto_calibrate(
+    reference: &GrayImage,
+    apex: Option<[f64; 2]>,
+    cfg: &TrackerConfig,
+) -> Result<(AutoClicks, Calibration), AutoCalError> {
+    let clicks = match apex {
+        Some(a) => clicks_from_apex(reference, a)?,
+        None => clicks_from_apex(reference, find_apex(reference)?)?,
+    };
+    let config = clicks.config("reference".into());
+    let calibration = Calibration::from_reference(reference, &config, cfg)?;
+    Ok((clicks, calibration))
+}
+
+/// The unit vector at image angle `angle` (radians).
+fn unit(angle: f64) -> [f64; 2] {
+    [angle.cos(), angle.sin()]
+}
+
+/// Bilinear grey level at `p`, `None` outside the image.
+fn grey(img: &GrayImage, p: [f64; 2]) -> Option<f64> {
+    let (w, h) = (img.width() as f64, img.height() as f64);
+    if !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0) {
+        return None;
+    }
+    let (x0, y0) = (p[0].floor().min(w - 2.0), p[1].floor().min(h - 2.0));
+    let (fx, fy) = (p[0] - x0, p[1] - y0);
+    let at = |dx: f64, dy: f64| img.get_pixel((x0 + dx) as u32, (y0 + dy) as u32)[0] as f64;
+    let top = at(0.0, 0.0) * (1.0 - fx) + at(1.0, 0.0) * fx;
+    let bottom = at(0.0, 1.0) * (1.0 - fx) + at(1.0, 1.0) * fx;
+    Some(top * (1.0 - fy) + bottom * fy)
+}
+
+/// The normal of direction `d` turned towards `towards` (relative to `d`'s origin).
+fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
+    let n = [-d[1], d[0]];
+    if dot(n, towards) < 0.0 {
+        scale(n, -1.0)
+    } else {
+        n
+    }
+}
+
+/// The pyramid's arc on the ring around `apex`: the two faces' directions (image
+/// angles, radians), the polarity (+1 bright probe) and the probe's and background's
+/// levels.
+struct Wedge {
+    ends: [f64; 2],
+    polarity: f64,
+}
+
+fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
+    let not_found = |reason: String| AutoCalError::NotFound {
+        edges: "blue and green edges",
+        reason,
+    };
+    let step = std::f64::consts::TAU / RING_SAMPLES as f64;
+    let mut ring = Vec::with_capacity(RING_SAMPLES);
+    for k in 0..RING_SAMPLES {
+        let u = unit(k as f64 * step);
+        let mut sum = 0.0;
+        for dr in [-2.0, -1.0, 0.0, 1.0, 2.0] {
+            let v = grey(img, add(apex, scale(u, RING_PX + dr)));
+            sum += v.ok_or_else(|| {
+                not_found(format!(
+                    "the apex ({:.1}, {:.1}) is within {RING_PX} px of the border",
+                    apex[0], apex[1]
+                ))
+            })?;
+        }
+        ring.push(sum / 5.0);
+    }
+    let mut sorted = ring.clone();
+    sorted.sort_by(f64::total_cmp);
+    let (lo, hi) = (sorted[RING_SAMPLES / 10], sorted[RING_SAMPLES * 9 / 10]);
+    let mid = 0.5 * (lo + hi);
+    // The best arc of each polarity (largest sum of levels beyond the mid level; the
+    // ring is circular, so it is scanned twice round).
+    let mut best: Option<(f64, usize, usize, f64)> = None;
+    for polarity in [1.0, -1.0] {
+        let (mut sum, mut start) = (0.0, 0);
+        for i in 0..2 * RING_SAMPLES {
+            let v = polarity * (ring[i % RING_SAMPLES] - mid);
+            if sum <= 0.0 {
+                sum = 0.0;
+                start = i;
+            }
+            sum += v;
+            let len = i + 1 - start;
+            let width_deg = (len as f64 * step).to_degrees();
+            if len <= RING_SAMPLES
+                && (ARC_DEG.0..=ARC_DEG.1).contains(&width_deg)
+                && best.is_none_or(|b| sum > b.0)
+            {
+                best = Some((sum, start, i, polarity));
+            }
+        }
+        if best.is_some() {
+            break;
+        }
+    }
+    let Some((_, start, end, polarity)) = best else {
+        return Err(not_found(format!(
+            "no arc of {}-{} deg stands out on a ring of {RING_PX} px around ({:.1}, {:.1}); \
+             levels {lo:.0}-{hi:.0}",
+            ARC_DEG.0, ARC_DEG.1, apex[0], apex[1]
+        )));
+    };
+    if hi - lo < 8.0 {
+        return Err(not_found(format!(
+            "the ring around ({:.1}, {:.1}) is flat (levels {lo:.0}-{hi:.0})",
+            apex[0], apex[1]
+        )));
+    }
+    // The arc's ends at half a sample outside its first and last samples.
+    let ends = [(start as f64 - 0.5) * step, (end as f64 + 0.5) * step];
+    Ok(Wedge { ends, polarity })
+}
+
+/// One profile across an edge at `centre`, inward normal `n`: the crossing of the mid
+/// level (signed offset along `n`, nearest to the centre) and the step.
+fn crossing(img: &GrayImage, centre: [f64; 2], n: [f64; 2], polarity: f64) -> Option<(f64, f64)> {
+    let d = [n[1], -n[0]];
+    let at = |s: f64| -> Option<f64> {
+        let p = add(centre, scale(n, s));
+        Some(0.5 * (grey(img, add(p, scale(d, 0.5)))? + grey(img, sub(p, scale(d, 0.5)))?))
+    };
+    let (a, b) = LEVEL_PX;
+    let mut inside = 0.0;
+    let mut outside = 0.0;
+    let mut k = 0.0;
+    let mut s = a;
+    while s <= b {
+        inside += at(s)?;
+        outside += at(-s)?;
+        k += 1.0;
+        s += 0.5;
+    }
+    let step = polarity * (inside - outside) / k;
+    let mid = 0.5 * (inside + outside) / k;
+    let mut best: Option<f64> = None;
+    let mut s = -b;
+    let mut prev = polarity * (at(s)? - mid);
+    while s < b {
+        let next = polarity * (at(s + 0.25)? - mid);
+        if prev < 0.0 && next >= 0.0 {
+            let x = s + 0.25 * prev / (prev - next);
+            if best.is_none_or(|c| x.abs() < c.abs()) {
+                best = Some(x);
+            }
+        }
+        prev = next;
+        s += 0.25;
+    }
+    Some((best?, step))
+}
+
+/// Traces an edge from `origin` along `dir` (inside towards `inside`), from `start`
+/// pixels on: the crossings and how far it ran.
+fn trace(
+    img: &GrayImage,
+    origin: [f64; 2],
+    dir: [f64; 2],
+    inside: [f64; 2],
+    polarity: f64,
+    start: f64,
+) -> (Vec<[f64; 2]>, f64) {
+    let n = normal_towards(dir, inside);
+    let mut points: Vec<[f64; 2]> = Vec::new();
+    let (mut first_steps, mut misses, mut t, mut reached) = (Vec::new(), 0, start, start);
+    let limit = (img.width() + img.height()) as f64;
+    while t < limit && misses < MISSES {
+        let centre = add(origin, scale(dir, t));
+        let Some((x, step)) = crossing(img, centre, n, polarity) else {
+            if grey(img, centre).is_none() {
+                break;
+            }
+            misses += 1;
+            t += 1.0;
+            continue;
+        };
+        let reference = if first_steps.len() < 3 {
+            first_steps.push(step);
+            f64::NEG_INFINITY
+        } else {
+            let mut s = first_steps.clone();
+            s.sort_by(f64::total_cmp);
+            STEP_SHARE * s[1]
+        };
+        if step > reference.max(4.0) && x.abs() <= MAX_CROSSING_PX {
+            points.push(add(centre, scale(n, x)));
+            misses = 0;
+            reached = t;
+        } else {
+            misses += 1;
+        }
+        t += 1.0;
+    }
+    (points, reached)
+}
+
+/// Total-least-squares line through points: a point on it and its direction.
+fn fit_line(pts: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2])> {
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let c = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in pts {
+        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    Some((c, unit(theta)))
+}
+
+/// A traced edge: a point, its direction (from the apex or the corner outward), and
+/// the traced span along it.
+#[derive(Debug, Clone, Copy)]
+struct Traced {
+    point: [f64; 2],
+    dir: [f64; 2],
+    span: (f64, f64),
+}
+
+impl Traced {
+    fn at(&self, t: f64) -> [f64; 2] {
+        add(self.point, scale(self.dir, t))
+    }
+
+    /// Points at the given shares of the traced span.
+    fn clicks(&self, shares: &[f64]) -> Vec<[f64; 2]> {
+        let (a, b) = self.span;
+        shares.iter().map(|f| self.at(a + f * (b - a))).collect()
+    }
+}
+
+/// The line through traced points, directed like `dir`, with the points' span along it.
+fn traced(points: &[[f64; 2]], dir: [f64; 2]) -> Option<Traced> {
+    let mut points = points.to_vec();
+    let (mut c, mut d) = fit_line(&points)?;
+    for _ in 0..3 {
+        let normal = [-d[1], d[0]];
+        points.retain(|p| dot(sub(*p, c), normal).abs() <= INLIER_PX);
+        (c, d) = fit_line(&points)?;
+    }
+    let d = if dot(d, dir) < 0.0 { scale(d, -1.0) } else { d };
+    let ts = points.iter().map(|p| dot(sub(*p, c), d));
+    let span = ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+        (a.min(t), b.max(t))
+    });
+    (span.1 - span.0 >= MIN_EDGE_PX).then_some(Traced {
+        point: c,
+        dir: d,
+        span,
+    })
+}
+
+/// The edges from a click near the apex.
+pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, AutoCalError> {
+    let w = wedge(img, apex)?;
+    let dirs = w.ends.map(unit);
+    let axis = {
+        let s = add(dirs[0], dirs[1]);
+        scale(s, 1.0 / norm(s).max(1e-9))
+    };
+    // The two faces, each traced with the wedge's inside towards the axis, twice: the
+    // second time along the line the first found, from the apex it implies.
+    let mut faces = [None; 2];
+    for k in 0..2 {
+        let (pts, _) = trace(
+            img,
+            apex,
+            dirs[k],
+            sub(axis, dirs[k]),
+            w.polarity,
+            FACE_START_PX,
+        );
+        faces[k] = traced(&pts, dirs[k]);
+    }
+    let (Some(f0), Some(f1)) = (faces[0], faces[1]) else {
+        return Err(AutoCalError::NotFound {
+            edges: "a face of the pyramid",
+            reason: format!(
+                "the step along {} face fades within {MIN_EDGE_PX} px of the apex",
+                if faces[0].is_none() {
+                    "one"
+                } else {
+                    "the other"
+                }
+            ),
+        });
+    };
+    let line = |t: &Traced| Line::through(t.point, [-t.dir[1], t.dir[0]]);
+    let apex = line(&f0).intersect(&line(&f1)).unwrap_or(apex);
+    let faces = [f0, f1].map(|f| {
+        let inside = sub(axis, f.dir);
+        let (pts, _) = trace(img, apex, f.dir, inside, w.polarity, FACE_START_PX);
+        traced(&pts, f.dir).unwrap_or(f)
+    });
+    let (red, exit) = red_edge(img, apex, axis, &faces, w.polarity)?;
+    // The beam runs further from the pyramid towards the clamp than to the free end.
+    let t_exit = dot(sub(exit, red.point), red.dir);
+    let (clamp, free_t, clamp_t) = if red.span.1 - t_exit >= t_exit - red.span.0 {
+        (red.dir, red.span.0, red.span.1)
+    } else {
+        (scale(red.dir, -1.0), -red.span.1, -red.span.0)
+    };
+    let (blue, green) = if dot(faces[0].dir, clamp) >= dot(faces[1].dir, clamp) {
+        (faces[0], faces[1])
+    } else {
+        (faces[1], faces[0])
+    };
+    // Red near the free end: from it towards the clamp, over twice the back face.
+    let reach = (2.0 * (blue.span.1 - blue.span.0)).max(20.0);
+    let beam = Traced {
+        point: red.point,
+        dir: clamp,
+        span: (free_t, clamp_t.min(free_t + reach)),
+    };
+    let shares = [0.2, 0.5, 0.8];
+    Ok(AutoClicks {
+        red: beam.clicks(&[0.15, 0.5, 0.85]),
+        blue: blue.clicks(&shares),
+        green: green.clicks(&shares),
+    })
+}
+
+/// The beam's upper face: where the probe ends along the pyramid's axis, its direction
+/// the strongest step's, traced both ways (span: negative one way, positive the other).
+fn red_edge(
+    img: &GrayImage,
+    apex: [f64; 2],
+    axis: [f64; 2],
+    faces: &[Traced; 2],
+    polarity: f64,
+) -> Result<(Traced, [f64; 2]), AutoCalError> {
+    let not_found = |reason: String| AutoCalError::NotFound {
+        edges: "red edge",
+        reason,
+    };
+    let side = [-axis[1], axis[0]];
+    let level = |t: f64| -> Option<f64> {
+        let c = add(apex, scale(axis, t));
+        let mut sum = 0.0;
+        for s in [-1.0, 0.0, 1.0] {
+            sum += grey(img, add(c, scale(side, s)))?;
+        }
+        Some(sum / 3.0)
+    };
+    // The probe's level inside the pyramid, the background's beyond the apex.
+    let start = FACE_START_PX.max(0.5 * faces[0].span.1.min(faces[1].span.1));
+    let inside =
+        level(start).ok_or_else(|| not_found("the pyramid runs out of the frame".into()))?;
+    let outside = level(-RING_PX).unwrap_or(inside - polarity * 60.0);
+    let mid = 0.5 * (inside + outside);
+    let mut t = start;
+    let exit = loop {
+        let (Some(a), Some(b)) = (level(t), level(t + 0.25)) else {
+            return Err(not_found(
+                "the probe runs out of the frame along the pyramid's axis".into(),
+            ));
+        };
+        // Out of the probe for good: three pixels beyond are background as well.
+        if polarity * (a - mid) >= 0.0 && polarity * (b - mid) < 0.0 {
+            let beyond = (1..=3)
+                .all(|k| level(t + 0.25 + k as f64).is_some_and(|v| polarity * (v - mid) < 0.0));
+            if beyond {
+                break t + 0.25 * polarity * (a - mid) / (polarity * (a - b));
+            }
+        }
+        t += 0.25;
+    };
+    let p = add(apex, scale(axis, exit));
+    // The direction along which the step into the probe (towards the apex) is strongest.
+    let mut best = (f64::NEG_INFINITY, [1.0, 0.0]);
+    for k in 0..180 {
+        let d = unit((k as f64).to_radians());
+        let n = normal_towards(d, sub(apex, p));
+        let mut score = 0.0;
+        let mut s = -RED_SCORE_PX;
+        while s <= RED_SCORE_PX {
+            let c = add(p, scale(d, s));
+            if let (Some(a), Some(b)) = (
+                grey(img, add(c, scale(n, 2.5))),
+                grey(img, sub(c, scale(n, 2.5))),
+            ) {
+                score += (polarity * (a - b)).max(0.0);
+            }
+            s += 1.0;
+        }
+        if score > best.0 {
+            best = (score, d);
+        }
+    }
+    let d = best.1;
+    let inside = sub(apex, p);
+    let (mut pts, _) = trace(img, p, d, inside, polarity, 0.0);
+    let (back, _) = trace(img, p, scale(d, -1.0), inside, polarity, 1.0);
+    pts.extend(back);
+    let red = traced(&pts, d).ok_or_else(|| {
+        not_found(format!(
+            "no step along the beam's upper face at ({:.1}, {:.1})",
+            p[0], p[1]
+        ))
+    })?;
+    Ok((red, p))
+}
+
+/// The apex of the largest body touching a frame side: its point farthest from the
+/// beam's axis.
+pub fn find_apex(img: &GrayImage) -> Result<[f64; 2], AutoCalError> {
+    let mut hist = [0u64; 256];
+    for p in img.pixels() {
+        hist[p[0] as usize] += 1;
+    }
+    let all = otsu(&hist, 0);
+    let bright = otsu(&hist, all + 1);
+    let mut why = String::new();
+    for level in [bright, all] {
+        match body_apex(img, level) {
+            Ok(apex) => return Ok(apex),
+            Err(e) => why = e,
+        }
+    }
+    Err(AutoCalError::NoProbe(why))
+}
+
+/// Otsu's level over the grey levels from `from` up.
+fn otsu(hist: &[u64; 256], from: usize) -> usize {
+    let total: f64 = hist[from..].iter().map(|&c| c as f64).sum();
+    let sum: f64 = (from..256).map(|i| i as f64 * hist[i] as f64).sum();
+    let (mut w0, mut s0, mut best, mut level) = (0.0, 0.0, -1.0, from);
+    for (i, &count) in hist.iter().enumerate().skip(from) {
+        w0 += count as f64;
+        s0 += i as f64 * count as f64;
+        let w1 = total - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let between = w0 * w1 * (s0 / w0 - (sum - s0) / w1).powi(2);
+        if between > best {
+            best = between;
+            level = i;
+        }
+    }
+    level.min(254)
+}
+
+/// The apex of the largest body above `level` touching a frame side.
+fn body_apex(img: &GrayImage, level: usize) -> Result<[f64; 2], String> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let raw = img.as_raw();
+    let mut label = vec![0u32; w * h];
+    let mut best: Option<Vec<usize>> = None;
+    let mut queue = VecDeque::new();
+    let mut next = 0;
+    for seed in 0..w * h {
+        if label[seed] != 0 || (raw[seed] as usize) <= level {
+            continue;
+        }
+        next += 1;
+        let mut body = Vec::new();
+        label[seed] = next;
+        queue.push_back(seed);
+        while let Some(i) = queue.pop_front() {
+            body.push(i);
+            let (x, y) = (i % w, i / w);
+            let mut visit = |j: usize| {
+                if label[j] == 0 && raw[j] as usize > level {
+                    label[j] = next;
+                    queue.push_back(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if y + 1 < h {
+                visit(i + w);
+            }
+        }
+        let touches = body.iter().any(|&i| {
+            let (x, y) = (i % w, i / w);
+            x == 0 || y == 0 || x == w - 1 || y == h - 1
+        });
+        if touches && best.as_ref().is_none_or(|b| body.len() > b.len()) {
+            best = Some(body);
+        }
+    }
+    let body = best.ok_or_else(|| format!("nothing above grey level {level} touches a side"))?;
+    if body.len() < (w * h) / 500 {
+        return Err(format!(
+            "the largest body above grey level {level} touching a side has {} pixels",
+            body.len()
+        ));
+    }
+    // The side it enters from: the one it touches most; the beam's axis through its
+    // pixels within a fifth of its depth from that side.
+    let xy = |i: usize| [(i % w) as f64, (i / w) as f64];
+    let sides = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]];
+    let depth = |s: usize, p: [f64; 2]| match s {
+        0 => p[0],
+        1 => (w - 1) as f64 - p[0],
+        2 => p[1],
+        _ => (h - 1) as f64 - p[1],
+    };
+    let side = (0..4)
+        .max_by_key(|&s| body.iter().filter(|&&i| depth(s, xy(i)) < 0.5).count())
+        .unwrap_or(0);
+    let reach = body.iter().map(|&i| depth(side, xy(i))).fold(0.0, f64::max);
+    let near: Vec<[f64; 2]> = body
+        .iter()
+        .map(|&i| xy(i))
+        .filter(|&p| depth(side, p) <= 0.2 * reach)
+        .collect();
+    let (c, d) = fit_line(&near).unwrap_or((xy(body[0]), [-sides[side][1], sides[side][0]]));
+    let d = if dot(d, sides[side]) < 0.0 {
+        scale(d, -1.0)
+    } else {
+        d
+    };
+    let n = [-d[1], d[0]];
+    let apex = body
+        .iter()
+        .map(|&i| xy(i))
+        .max_by(|a, b| {
+            dot(n, sub(*a, c))
+                .abs()
+                .total_cmp(&dot(n, sub(*b, c)).abs())
+        })
+        .unwrap_or(c);
+    Ok(apex)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn otsu_splits_two_levels_between_them() {
+        let mut hist = [0u64; 256];
+        hist[60] = 900;
+        hist[200] = 100;
+        let level = otsu(&hist, 0);
+        assert!((60..200).contains(&level), "{level}");
+    }
+
+    #[test]
+    fn a_flat_image_has_no_pyramid() {
+        let img = GrayImage::from_pixel(100, 80, image::Luma([90]));
+        let err = clicks_from_apex(&img, [50.0, 40.0]).unwrap_err();
+        assert!(err.to_string().contains("not found near the apex"), "{err}");
+    }
+}
