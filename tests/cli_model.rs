@@ -176,7 +176,7 @@ fn a_bad_config_names_file_key_and_value() {
     let file = path.display().to_string();
     assert!(err.contains(&file), "{err}");
     assert!(err.contains("cantilever.spring_constant_n_per_m"), "{err}");
-    assert!(err.contains("got -0.2"), "{err}");
+    assert!(err.contains("= -0.2 is out of range"), "{err}");
 
     let missing = dir.path().join("absent.toml");
     let output = run_model(&["--config", missing.to_str().expect("UTF-8 path")], b"5\n");

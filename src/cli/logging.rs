@@ -6,8 +6,10 @@
 //!   own, and `journalctl -p warning` finds the warnings.
 //! - Elsewhere each line starts with the UTC time and the level; colour only when
 //!   standard error is a terminal, so a file or a pipe gets no escape codes.
-//! - Repeats are rate-limited: each place in the code that logs writes at most one line
-//!   a second, and the next line it writes says how many were left out.
+//! - Repeats are rate-limited: each place in the code that logs writes at most
+//!   [`LINES_PER_INTERVAL`] lines a second (a few distinct lines at once, such as one
+//!   per device or per frame of a short replay, all pass), and the next line it writes
+//!   after a pause says how many were left out.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -24,8 +26,10 @@ use tracing_subscriber::registry::LookupSpan;
 use tracing_subscriber::util::SubscriberInitExt;
 use tracing_subscriber::{EnvFilter, Layer};
 
-/// How often one place in the code may write a line.
+/// The window over which one place in the code may write [`LINES_PER_INTERVAL`] lines.
 const REPEAT_INTERVAL: Duration = Duration::from_secs(1);
+/// Lines one place in the code may write per [`REPEAT_INTERVAL`].
+pub const LINES_PER_INTERVAL: u32 = 10;
 
 /// Where the lines go and how they look.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -175,7 +179,8 @@ struct RateLimit {
 
 #[derive(Debug, Clone, Copy)]
 struct Repeats {
-    last_written: Instant,
+    window_start: Instant,
+    written: u32,
     left_out: u64,
     /// Left out before the line now being written (read by its formatter).
     pending: u64,
@@ -188,28 +193,23 @@ impl RateLimit {
             return true;
         };
         let now = Instant::now();
-        match seen.get_mut(&callsite) {
-            Some(r) if now.duration_since(r.last_written) < REPEAT_INTERVAL => {
-                r.left_out += 1;
-                false
-            }
-            Some(r) => {
-                r.last_written = now;
-                r.pending = std::mem::take(&mut r.left_out);
-                true
-            }
-            None => {
-                seen.insert(
-                    callsite,
-                    Repeats {
-                        last_written: now,
-                        left_out: 0,
-                        pending: 0,
-                    },
-                );
-                true
-            }
+        let r = seen.entry(callsite).or_insert(Repeats {
+            window_start: now,
+            written: 0,
+            left_out: 0,
+            pending: 0,
+        });
+        if now.duration_since(r.window_start) >= REPEAT_INTERVAL {
+            r.window_start = now;
+            r.written = 0;
         }
+        if r.written >= LINES_PER_INTERVAL {
+            r.left_out += 1;
+            return false;
+        }
+        r.written += 1;
+        r.pending = std::mem::take(&mut r.left_out);
+        true
     }
 
     /// How many lines from `callsite` were left out before the one being written.
@@ -300,7 +300,7 @@ mod tests {
     }
 
     #[test]
-    fn repeats_are_one_line_a_second_with_a_count() {
+    fn repeats_are_a_few_lines_a_second_with_a_count() {
         // One place in the code, logging again and again.
         let late = |ms: u32| tracing::warn!("frame late by {ms} ms");
         let out = lines(Style::Journal, || {
@@ -314,13 +314,16 @@ mod tests {
             }
         });
         let late: Vec<_> = out.iter().filter(|l| l.contains("frame late")).collect();
-        assert_eq!(late.len(), 2, "{out:?}");
-        assert!(!late[0].contains("left out"), "{}", late[0]);
+        let burst = LINES_PER_INTERVAL as usize;
+        assert_eq!(late.len(), burst + 3, "{out:?}");
+        assert!(late[..burst].iter().all(|l| !l.contains("left out")));
+        let left_out = 100 - burst;
         assert!(
-            late[1].ends_with("(99 similar lines left out)"),
+            late[burst].ends_with(&format!("({left_out} similar lines left out)")),
             "{}",
-            late[1]
+            late[burst]
         );
+        assert!(!late[burst + 1].contains("left out"));
         assert!(out.iter().any(|l| l.contains("another place")));
     }
 

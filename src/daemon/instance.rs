@@ -42,7 +42,7 @@ impl InstanceLock {
     pub fn acquire(targets: &[LockTarget]) -> anyhow::Result<InstanceLock> {
         let mut files = Vec::with_capacity(targets.len());
         for target in targets {
-            files.push(lock_one(target)?);
+            files.extend(lock_one(target)?);
         }
         Ok(InstanceLock { _files: files })
     }
@@ -137,7 +137,9 @@ fn is_writable_dir(dir: &Path) -> bool {
     dir.is_dir() && unsafe { libc::access(c.as_ptr(), libc::W_OK) } == 0
 }
 
-fn lock_one(target: &LockTarget) -> anyhow::Result<File> {
+/// The lock on one target; `None` for a device node that does not exist (opening the
+/// devices then fails with the message that names the missing device).
+fn lock_one(target: &LockTarget) -> anyhow::Result<Option<File>> {
     let file = if target.lock_file {
         if let Some(parent) = target.path.parent() {
             std::fs::create_dir_all(parent)
@@ -158,6 +160,10 @@ fn lock_one(target: &LockTarget) -> anyhow::Result<File> {
             .read(true)
             .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY)
             .open(&target.path)
+    };
+    let file = match file {
+        Err(e) if !target.lock_file && e.kind() == io::ErrorKind::NotFound => return Ok(None),
+        other => other,
     }
     .map_err(|e| {
         anyhow::anyhow!(
@@ -189,7 +195,7 @@ fn lock_one(target: &LockTarget) -> anyhow::Result<File> {
         let _ = f.set_len(0);
         let _ = writeln!(f, "{}", std::process::id());
     }
-    Ok(file)
+    Ok(Some(file))
 }
 
 /// The pid holding a flock on `file`: from /proc/locks (any file), else the pid the
