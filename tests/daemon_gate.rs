@@ -82,7 +82,11 @@ fn adversarial(scene: &SemScene, sequence: u64, rng: &mut Rng) -> GrayImage {
     let (mut spec, _) = scene.frame(0.0, sequence, Vector3::zeros());
     match rng.next() % 3 {
         0 => {
-            let sign = if rng.next() % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = if rng.next().is_multiple_of(2) {
+                1.0
+            } else {
+                -1.0
+            };
             spec.angle_deg = sign * rng.uniform(10.0, 20.0);
             nanoforce::scene::render(&spec).0
         }
@@ -93,7 +97,7 @@ fn adversarial(scene: &SemScene, sequence: u64, rng: &mut Rng) -> GrayImage {
             for _ in 0..6 {
                 let x0 = rng.uniform(0.0, f64::from(w) * 0.8) as u32;
                 let y0 = rng.uniform(0.0, f64::from(h) * 0.8) as u32;
-                let (bw, bh) = if rng.next() % 2 == 0 {
+                let (bw, bh) = if rng.next().is_multiple_of(2) {
                     (
                         rng.uniform(60.0, 300.0) as u32,
                         rng.uniform(4.0, 16.0) as u32,
