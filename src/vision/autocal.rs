@@ -24,7 +24,7 @@ use std::collections::VecDeque;
 
 use image::GrayImage;
 
-use super::geometry::{add, dot, norm, scale, sub, Line};
+use super::geometry::{add, dot, norm, principal_axis, scale, sub, unit, Line};
 use super::{Calibration, VisionError};
 use crate::config::{CalibrationConfig, TrackerConfig};
 
@@ -98,11 +98,6 @@ pub fn auto_calibrate(
     let config = clicks.config("reference".into());
     let calibration = Calibration::from_reference(reference, &config, cfg)?;
     Ok((clicks, calibration))
-}
-
-/// The unit vector at image angle `angle` (radians).
-fn unit(angle: f64) -> [f64; 2] {
-    [angle.cos(), angle.sin()]
 }
 
 /// Bilinear grey level at `p`, `None` outside the image.
@@ -292,19 +287,7 @@ fn fit_line(pts: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2])> {
     if pts.len() < 3 {
         return None;
     }
-    let n = pts.len() as f64;
-    let c = [
-        pts.iter().map(|p| p[0]).sum::<f64>() / n,
-        pts.iter().map(|p| p[1]).sum::<f64>() / n,
-    ];
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in pts {
-        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let (c, theta, _) = principal_axis(pts);
     Some((c, unit(theta)))
 }
 

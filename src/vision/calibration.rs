@@ -15,7 +15,9 @@ use image::GrayImage;
 use super::bands::{bands, BendPrior};
 use super::candidates::angle_gap;
 use super::edges::EdgeMap;
-use super::geometry::{add, along, dot, norm, scale, screen_deg_from_image_rad, sub, Line};
+use super::geometry::{
+    add, along, dot, norm, principal_axis, scale, screen_deg_from_image_rad, sub, Line,
+};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner, Turns};
 use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
@@ -565,25 +567,13 @@ fn side_word(sign: f64) -> &'static str {
 
 /// Total-least-squares line through points, normal oriented like `hint`.
 fn fit_points(pts: &[[f64; 2]], hint: [f64; 2]) -> Option<Line> {
-    let n = pts.len() as f64;
-    if n < 2.0 {
+    if pts.len() < 2 {
         return None;
     }
-    let c = [
-        pts.iter().map(|p| p[0]).sum::<f64>() / n,
-        pts.iter().map(|p| p[1]).sum::<f64>() / n,
-    ];
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in pts {
-        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
     // Direction = principal axis; normal perpendicular to it.
-    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let (c, theta, spread) = principal_axis(pts);
     let mut normal = [-theta.sin(), theta.cos()];
-    if sxx + syy < 1e-9 {
+    if spread < 1e-9 {
         return None;
     }
     if dot(normal, hint) < 0.0 {

@@ -43,9 +43,26 @@ pub fn wrap_pi(angle_rad: f64) -> f64 {
 }
 
 /// Unit vector at an image angle.
-#[cfg(test)]
 pub fn unit(angle_rad: f64) -> [f64; 2] {
     [angle_rad.cos(), angle_rad.sin()]
+}
+
+/// The principal axis of points (total least squares): their centroid, the axis's
+/// image angle, and the points' summed squared distance from the centroid.
+pub fn principal_axis(pts: &[[f64; 2]]) -> ([f64; 2], f64, f64) {
+    let n = pts.len() as f64;
+    let c = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in pts {
+        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    (c, 0.5 * (2.0 * sxy).atan2(sxx - syy), sxx + syy)
 }
 
 /// Rotates `v` by an image angle.
