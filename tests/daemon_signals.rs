@@ -225,14 +225,7 @@ fn stop_signals_zero_the_outputs_and_record_the_stop() {
 
 #[test]
 fn a_panic_in_any_thread_zeroes_the_outputs_and_records_the_stop() {
-    for thread in [
-        "frames",
-        "tracker",
-        "haptic-loop",
-        "telemetry",
-        "monitor",
-        "supervisor",
-    ] {
+    for thread in nanoforce::daemon::inject::THREADS {
         let state = tempfile::tempdir().unwrap();
         let stats = state.path().join("stats-out.json");
         let d = Running::start(

@@ -13,7 +13,6 @@
 mod tracker_support;
 
 use std::collections::BTreeMap;
-use std::path::Path;
 
 use image::GrayImage;
 use nanoforce::scene::adversarial::{Adversary, Decoy};
@@ -25,25 +24,6 @@ use tracker_support::rendered;
 /// Sessions of the suite the frames are made for, and frames per session and kind.
 const SESSIONS: usize = 6;
 const FRAMES_PER_KIND: usize = 30;
-
-/// The real SEM crops, as 8-bit grey images.
-fn real_sem() -> Vec<GrayImage> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-sem");
-    let mut paths: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "png"))
-        .collect();
-    paths.sort();
-    paths
-        .iter()
-        .map(|p| {
-            image::open(p)
-                .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-                .to_luma8()
-        })
-        .collect()
-}
 
 /// A random sub-window (half to all of a crop, 4:3), flipped at random, resized to the
 /// session's frame size.
@@ -97,7 +77,7 @@ impl Tally {
 
 fn run(seed: u64) -> BTreeMap<&'static str, Tally> {
     let sessions = scene::suite(seed, SESSIONS, 1);
-    let crops = real_sem();
+    let crops = rendered::real_crops();
     let mut adversary = Adversary::new();
     let mut frame = GrayImage::new(1, 1);
     let mut tallies: BTreeMap<&'static str, Tally> = BTreeMap::new();
