@@ -212,7 +212,7 @@ pub mod rendered {
     use super::Truth;
     use image::GrayImage;
     use nanoforce::config::{CalibrationConfig, TrackerConfig};
-    use nanoforce::scene::{render, render_into, render_over_into, Segment, Session};
+    use nanoforce::scene::{render, render_into, render_over_into, FrameSpec, Segment, Session};
     use nanoforce::vision::{Calibration, Estimate, Tracker};
 
     /// The tracker settings and calibration clicks the session's probe.toml would hold.
@@ -325,6 +325,19 @@ pub mod rendered {
         (truths, estimates)
     }
 
+    /// The truth of frame `k` of a session, rendered from `spec`.
+    fn truth(k: usize, spec: &FrameSpec, t: &nanoforce::scene::Truth) -> Truth {
+        Truth {
+            frame: format!("frame_{k:05}"),
+            detected: t.probe_in_view,
+            angle_deg: t.angle_deg,
+            force_nn: t.force_nn,
+            tip: [t.tip_x, t.tip_y],
+            magnification: t.magnification,
+            style: spec.look.style_name.to_string(),
+        }
+    }
+
     /// Renders every frame of `session` and tracks it with `tracker`, in order.
     pub fn run_with(session: &Session, mut tracker: Tracker) -> (Vec<Truth>, Vec<Estimate>) {
         let mut frame = GrayImage::new(1, 1);
@@ -333,15 +346,7 @@ pub mod rendered {
         for (k, spec) in session.frames.iter().enumerate() {
             let t = render_into(spec, &mut frame);
             estimates.push(tracker.track(&frame));
-            truths.push(Truth {
-                frame: format!("frame_{k:05}"),
-                detected: t.probe_in_view,
-                angle_deg: t.angle_deg,
-                force_nn: t.force_nn,
-                tip: [t.tip_x, t.tip_y],
-                magnification: t.magnification,
-                style: spec.look.style_name.to_string(),
-            });
+            truths.push(truth(k, spec, &t));
         }
         (truths, estimates)
     }
@@ -384,15 +389,7 @@ pub mod rendered {
             for (k, spec) in s.frames.iter().enumerate() {
                 let t = render_over_into(spec, crops, &mut frame);
                 estimates.push(tracker.track(&frame));
-                truths.push(Truth {
-                    frame: format!("frame_{k:05}"),
-                    detected: t.probe_in_view,
-                    angle_deg: t.angle_deg,
-                    force_nn: t.force_nn,
-                    tip: [t.tip_x, t.tip_y],
-                    magnification: t.magnification,
-                    style: spec.look.style_name.to_string(),
-                });
+                truths.push(truth(k, spec, &t));
             }
         }
         (truths, estimates)
