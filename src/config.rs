@@ -269,7 +269,7 @@ const WIDTH_UM: Range = Range::new(1.0, 200.0, "um");
 const THICKNESS_UM: Range = Range::new(0.1, 20.0, "um");
 /// Wider than 45 degrees the search windows of neighbouring edges overlap; narrower than
 /// 1 degree no deflection fits in the window.
-const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
+pub const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
 const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
 /// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
 const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");

@@ -108,6 +108,15 @@ fn clicks_outside_the_image_and_bad_syntax_are_errors() {
         !out.status.success() && err.contains("/nonexistent.png"),
         "{err}"
     );
+    // The search window accepts what [tracker] window_deg accepts, no more.
+    for bad in ["0.5", "46", "nan"] {
+        let out = calibrate(dir.path(), &["--window-deg", bad]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("--window-deg must be 1 to 45 deg"),
+            "{bad}: {err}"
+        );
+    }
 }
 
 #[test]

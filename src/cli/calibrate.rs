@@ -110,8 +110,12 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         );
     }
     let reference = load_gray(&args.image)?;
-    if !(args.window_deg.is_finite() && args.window_deg > 0.0 && args.window_deg <= 45.0) {
-        anyhow::bail!("--window-deg must be in (0, 45], got {}", args.window_deg);
+    let window = crate::config::WINDOW_DEG;
+    if !window.contains(args.window_deg) {
+        anyhow::bail!(
+            "--window-deg must be {window}, as [tracker] window_deg; got {}",
+            args.window_deg
+        );
     }
     let tracker = TrackerConfig {
         threshold: args.threshold,

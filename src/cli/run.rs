@@ -328,6 +328,9 @@ fn load(path: Option<&Path>) -> anyhow::Result<(Config, String)> {
     }
 }
 
+/// Below this true peak (nN) the run summary gives force errors without a share of it.
+const MIN_PEAK_FOR_SHARE_NN: f64 = 10.0;
+
 fn summarise(stats: &crate::daemon::stats::RunStats) {
     let l = &stats.haptic_loop;
     let f = &stats.frames;
@@ -353,17 +356,28 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
         stats.force.rms_error_nn,
         stats.force.max_error_nn,
     ) {
-        tracing::info!(
-            "force against the simulated truth: peak {peak:.0} nN, rms error {rms:.1} nN ({:.2} %), \
-             max error {max:.1} nN ({:.2} %)",
-            100.0 * rms / peak.max(1e-9),
-            100.0 * max / peak.max(1e-9)
-        );
+        // A share of a peak means something only once the probe pressed.
+        if peak >= MIN_PEAK_FOR_SHARE_NN {
+            tracing::info!(
+                "force against the simulated truth: peak {peak:.0} nN, rms error {rms:.1} nN \
+                 ({:.2} %), max error {max:.1} nN ({:.2} %)",
+                100.0 * rms / peak,
+                100.0 * max / peak
+            );
+        } else {
+            tracing::info!(
+                "force against the simulated truth: no press (peak {peak:.1} nN), rms error \
+                 {rms:.1} nN, max error {max:.1} nN"
+            );
+        }
     }
     tracing::info!(
-        "safety: {} stale events, {} faults",
+        "safety: {} stale events, {} faults, {} estimates held and {} attenuated by the \
+         plausibility gate",
         stats.safety.stale_events,
-        stats.safety.faults
+        stats.safety.faults,
+        stats.safety.gate_held,
+        stats.safety.gate_attenuated
     );
     let m = &stats.memory;
     if let (Some(warm), Some(end)) = (m.rss_mb_after_warmup, m.rss_mb_end) {
