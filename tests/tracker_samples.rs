@@ -189,7 +189,7 @@ fn the_reference_reads_zero_and_clicks_are_refined() {
 }
 
 #[test]
-fn result_csvs_for_score_py() {
+fn result_csvs_for_nanoforce_score() {
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("tracker-results");
     std::fs::create_dir_all(&out).unwrap();
     for name in ["mixed", "sequence"] {
