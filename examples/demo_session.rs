@@ -1,7 +1,8 @@
 //! Writes the demo session in `replay/demo/` (or any folder): a rendered 640x480 sequence
-//! at 60 Hz of an operator pressing and releasing, with the magnification changed now
-//! and then and a few frames without the probe, in the layout of scene.md (probe.toml,
-//! reference.png, frames/, truth.csv). The session in the repository was made with
+//! at 60 Hz of an operator pressing and releasing, with the magnification changed now and
+//! then and a few frames without the probe, in the layout of docs/conventions.md
+//! (probe.toml, reference.png, frames/, truth.csv). The session in the repository was made
+//! with
 //!
 //! ```text
 //! cargo run --release --example demo_session -- replay/demo

@@ -203,11 +203,11 @@ impl fmt::Display for Threshold {
 }
 
 /// Where pixel coordinates count from, in the config's clicks and in every output
-/// (`tracker.pixel_origin`). Inside nanoforce pixels always follow scene.md
+/// (`tracker.pixel_origin`). Inside nanoforce pixels always follow docs/conventions.md
 /// (`Centre`); the conversion happens where numbers enter or leave.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PixelOrigin {
-    /// scene.md: the top-left pixel's centre is (0, 0).
+    /// docs/conventions.md: the top-left pixel's centre is (0, 0).
     #[default]
     Centre,
     /// The top-left pixel's top-left corner is (0, 0), so its centre is (0.5, 0.5)
@@ -216,7 +216,7 @@ pub enum PixelOrigin {
 }
 
 impl PixelOrigin {
-    /// What to add to a scene.md coordinate to express it from this origin.
+    /// What to add to a centre-counted coordinate to express it from this origin.
     pub fn offset_px(self) -> f64 {
         match self {
             PixelOrigin::Centre => 0.0,
@@ -224,12 +224,12 @@ impl PixelOrigin {
         }
     }
 
-    /// A scene.md point expressed from this origin.
+    /// A centre-counted point expressed from this origin.
     pub fn output(self, p: [f64; 2]) -> [f64; 2] {
         p.map(|v| v + self.offset_px())
     }
 
-    /// A point given from this origin, in scene.md's frame.
+    /// A point given from this origin, counted from the pixel centre.
     pub fn input(self, p: [f64; 2]) -> [f64; 2] {
         p.map(|v| v - self.offset_px())
     }
@@ -314,7 +314,7 @@ pub struct CalibrationConfig {
 }
 
 impl CalibrationConfig {
-    /// Clicks given from `origin`, brought into scene.md's frame.
+    /// Clicks given from `origin`, brought to count from the pixel centre.
     pub fn counted_from(mut self, origin: PixelOrigin) -> CalibrationConfig {
         for points in [&mut self.red, &mut self.blue, &mut self.green] {
             for p in points.iter_mut() {
@@ -631,7 +631,7 @@ impl Checker<'_> {
                 self.invalid(
                     "tracker.pixel_origin",
                     format_args!("{text:?}"),
-                    "must be \"centre\" (scene.md: the top-left pixel's centre is 0, 0) or \
+                    "must be \"centre\" (the default: the top-left pixel's centre is 0, 0) or \
                      \"corner\" (its top-left corner is)",
                 )
             })?,
@@ -788,7 +788,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         let cfg = parse(&text).unwrap();
         assert_eq!(cfg.tracker.pixel_origin, PixelOrigin::Corner);
         assert_eq!(cfg.tracker.edge_bias_px, 0.3);
-        // Clicks counted from the corner are kept in scene.md's frame.
+        // Clicks counted from the corner are kept counted from the pixel centre.
         let cal = cfg.tracker.calibration.unwrap();
         assert_eq!(cal.red[0], [156.3, 32.9]);
         assert_eq!(cal.green[2], [314.3, 142.4]);

@@ -1,6 +1,6 @@
 //! `nanoforce report` on a replayed synthetic session: one self-contained page (every
 //! picture embedded, nothing fetched), the plots as PNG files, thumbnails drawn from the
-//! frames, and a summary whose accuracy is score.py's against truth.csv.
+//! frames, and a summary whose accuracy is `nanoforce score`'s against truth.csv.
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -88,7 +88,7 @@ fn replayed_session_report_is_self_contained_with_plots_and_accuracy() {
     }
     assert!(image::open(out_dir.join("thumbnails.png")).is_ok());
 
-    // The summary's accuracy is score.py's, computed from the files.
+    // The summary's accuracy is `nanoforce score`'s, computed from the files.
     let truth = read_truth(&dir.path().join("truth.csv")).unwrap();
     let results = read_results(&dir.path().join("replay.csv")).unwrap();
     let s = score(&truth, &results);

@@ -1,5 +1,6 @@
-//! Sessions written by the scene module have the on-disk layout of scene.md, parse with
-//! the project's config loader, and generated sets span the conditions they promise.
+//! Sessions written by the scene module have the session layout of docs/conventions.md,
+//! parse with the project's config loader, and generated sets span the conditions they
+//! promise.
 
 use std::path::Path;
 

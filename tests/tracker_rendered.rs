@@ -1,6 +1,7 @@
 //! The tracker on frames rendered with exact truth (`nanoforce::scene`): the 600-frame
-//! suite spanning every condition of scene.md, blank frames, the paper's grid, sequences
-//! with magnification jumps, random order, and calibration against the true edges.
+//! suite spanning every condition of docs/renderer.md, blank frames, the paper's grid,
+//! sequences with magnification jumps, random order, and calibration against the true
+//! edges.
 //!
 //! Thresholds sit just above the values measured on these seeds (docs/tracker.md), so
 //! a regression fails. Run with `cargo test --release --test tracker_rendered`.

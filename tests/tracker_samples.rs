@@ -1,14 +1,14 @@
 //! The tracker on the two public sample sessions, scored against their truth the way
-//! `score.py` does, plus calibration on their reference images.
+//! `nanoforce score` does, plus calibration on their reference images.
 //!
-//! Thresholds sit just above the measured values (docs/tracker.md), so a regression
-//! fails. Where their own image content puts the apex, the samples' truth is about
-//! (+0.6, -0.15) px away: a pixel-corner origin plus 0.65 px up the pyramid's axis,
-//! turning with the tip (docs/tracker.md, Public samples; an independent least-squares
-//! fit agrees with the tracker, and the rendered suite, with exact truth, shows 0.08
-//! px). With scene.md's convention (the default) the apex thresholds allow for that
-//! offset rather than hiding it; with the samples' convention (`pixel_origin` and an
-//! `edge_bias_px` measured on the other session) the apex meets 0.5 px with room.
+//! Thresholds sit just above the measured values (docs/tracker.md), so a regression fails.
+//! Where their own image content puts the apex, the samples' truth is about (+0.6, -0.15)
+//! px away: a pixel-corner origin plus 0.65 px up the pyramid's axis, turning with the tip
+//! (docs/tracker.md, Public samples; an independent least-squares fit agrees with the
+//! tracker, and the rendered suite, with exact truth, shows 0.08 px). With the default
+//! convention (docs/conventions.md) the apex thresholds allow for that offset rather than
+//! hiding it; with the samples' convention (`pixel_origin` and an `edge_bias_px` measured
+//! on the other session) the apex meets 0.5 px with room.
 mod tracker_support;
 
 use image::Rgb;
@@ -130,7 +130,7 @@ fn apex_in_the_samples_convention_calibrated_on_the_other_session() {
     assert!(bias.iter().all(|b| (0.27..=0.33).contains(b)), "{why}");
     assert!((bias[0] - bias[1]).abs() <= 0.03, "{why}");
     // Measured 0.124 (mixed) and 0.104 px (sequence); without the bias, corner-counted
-    // apexes are 0.66 and 0.70 px off, as far as scene.md's centre-counted ones.
+    // apexes are 0.66 and 0.70 px off, as far as the default's centre-counted ones.
     assert!(held_out[0] <= 0.135, "{why}");
     assert!(held_out[1] <= 0.115, "{why}");
     assert!(unbiased.iter().all(|m| *m >= 0.6), "{why}");
@@ -175,8 +175,8 @@ fn the_reference_reads_zero_and_clicks_are_refined() {
             (apex[0] - ref_apex[0]).hypot(apex[1] - ref_apex[1]) < 0.05,
             "{name}"
         );
-        // Clicks alone are tenths of a degree off (scene.md); the refined orientation
-        // moves away from them by about that much.
+        // Clicks alone are tenths of a degree off (docs/conventions.md); the refined
+        // orientation moves away from them by about that much.
         let moved: f64 = Edge::ALL
             .iter()
             .map(|&edge| {
@@ -189,7 +189,7 @@ fn the_reference_reads_zero_and_clicks_are_refined() {
 }
 
 #[test]
-fn result_csvs_for_score_py() {
+fn result_csvs_for_nanoforce_score() {
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("tracker-results");
     std::fs::create_dir_all(&out).unwrap();
     for name in ["mixed", "sequence"] {

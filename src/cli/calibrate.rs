@@ -63,7 +63,7 @@ pub struct CalibrateArgs {
     /// Search half-window, degrees, as [tracker] window_deg.
     #[arg(long, default_value_t = DEFAULT_WINDOW_DEG)]
     pub window_deg: f64,
-    /// Where the clicks (and the printed apex) count pixels from: "centre" (scene.md:
+    /// Where the clicks (and the printed apex) count pixels from: "centre" (the default:
     /// the top-left pixel's centre is 0,0) or "corner" (its corner is; ImageJ), as
     /// [tracker] pixel_origin.
     #[arg(long, default_value = "centre", value_name = "ORIGIN", value_parser = parse_origin)]

@@ -11,6 +11,7 @@ pub mod probe_devices;
 pub mod replay;
 pub mod report;
 pub mod run;
+pub mod score;
 
 /// Vision-based force feedback for nanomanipulation inside a scanning electron microscope.
 #[derive(Debug, Parser)]
@@ -39,6 +40,7 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     Calibrate(calibrate::CalibrateArgs),
     Report(report::ReportArgs),
+    Score(score::ScoreArgs),
     Model(model::ModelArgs),
     ProbeDevices(probe_devices::ProbeArgs),
 }
@@ -51,6 +53,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Replay(args) => replay::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Report(args) => report::run(args),
+        Command::Score(args) => score::run(args),
         Command::Model(args) => model::run(args),
         Command::ProbeDevices(args) => probe_devices::run(args),
     }
@@ -80,5 +83,13 @@ mod tests {
         let replay = cli.find_subcommand("replay").unwrap();
         let long = replay.get_long_about().unwrap().to_string();
         assert!(long.contains("CSV columns") && long.contains("angle_sigma_deg"));
+        let score = cli.find_subcommand("score").unwrap();
+        let long = score.get_long_about().unwrap().to_string();
+        assert!(long.contains("false_detections") && long.contains("force_err_"));
+        let args: Vec<String> = score
+            .get_positionals()
+            .map(|a| a.get_id().to_string())
+            .collect();
+        assert_eq!(args, ["truth", "result"]);
     }
 }

@@ -49,7 +49,7 @@ overwrite inputs: an overlay folder that is the frames folder, or a CSV or overl
 that is a frame, the configuration or its reference image, is refused before anything \
 is written.",
     after_help = "Example:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
-python3 score.py session/truth.csv out.csv"
+nanoforce score session/truth.csv out.csv"
 )]
 pub struct ReplayArgs {
     /// Folder of frames (PNG, TIFF, PGM), replayed in file-name order.

@@ -15,10 +15,10 @@ with no network (plots embedded), and the plots as PNG files beside it.\n\n\
 The page shows force and tip angle over time, detection and confidence over time, a \
 histogram of the processing time per frame, a strip of overlay thumbnails (found edges in \
 red, blue and green, apex marked) and a summary table: frames, detected, accuracy against \
-truth.csv when the session has one (score.py's definitions), and for a recording the \
+truth.csv when the session has one (`nanoforce score`'s definitions), and for a recording the \
 loop, latency and safety figures of its stats.json.\n\n\
 SESSION_DIR is either\n\
-- a replayed session: scene.md's layout (probe.toml, reference.png, frames/, maybe \
+- a replayed session: the layout of docs/conventions.md (probe.toml, reference.png, frames/, maybe \
 truth.csv) with the CSV of `nanoforce replay` in SESSION_DIR/replay.csv (or --csv); \
 thumbnails are drawn from frames/ and the CSV's edge columns; or\n\
 - a recording of `nanoforce run` (estimates.csv, stats.json, events.log and, when the run \

@@ -1,6 +1,6 @@
 //! The exact large-deflection elastica of a cantilever (length L, rigidity EI) clamped at
 //! the origin with zero slope and loaded at its free end by a force F of fixed direction,
-//! transverse to the undeformed beam (the paper's Eqs. 1-10, corrected as in scene.md).
+//! transverse to the undeformed beam (the paper's Eqs. 1-10, corrected in docs/model.md).
 //!
 //! With alpha = F L^2 / EI, s0 = sin(phi0), c0 = cos(phi0) and the Carlson integrals
 //! R = R_F(1 - s0, 1 + s0, c0^2), R_D = R_D(1 - s0, 1 + s0, c0^2):

@@ -1,5 +1,5 @@
 //! The cantilever physics: the exact large-deflection elastica of a cantilever under a
-//! tip load of fixed direction (the paper's Eqs. 1-10, corrected as in scene.md), the
+//! tip load of fixed direction (the paper's Eqs. 1-10, corrected in docs/model.md), the
 //! precomputed lookup table the tracker uses, and the beam's stiffness.
 //!
 //! - [`exact`], [`centreline`], [`slope_rad`]: the closed form in Carlson's elliptic

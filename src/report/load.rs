@@ -1,8 +1,9 @@
 //! Reading a session folder for the report, in either of its two shapes:
 //!
-//! - **replayed**: scene.md's layout (`probe.toml`, `reference.png`, `frames/`, maybe
-//!   `truth.csv`) plus the CSV `nanoforce replay` wrote, by default `replay.csv` in the
-//!   folder. Time comes from `truth.csv`'s `t_s` when there is one, else the frame index.
+//! - **replayed**: the session layout of docs/conventions.md (`probe.toml`,
+//!   `reference.png`, `frames/`, maybe `truth.csv`) plus the CSV `nanoforce replay` wrote,
+//!   by default `replay.csv` in the folder. Time comes from `truth.csv`'s `t_s` when there
+//!   is one, else the frame index.
 //! - **recorded** by `nanoforce run`: `estimates.csv` (one row per tracked frame, time
 //!   `frame_time_s`), `stats.json`, `events.log` and, when the run recorded them,
 //!   overlay thumbnails in `thumbnails/`.
@@ -30,7 +31,7 @@ pub struct FrameRow {
     pub true_force_nn: Option<f64>,
     /// From truth.csv (replayed synthetic sessions).
     pub true_angle_deg: Option<f64>,
-    /// The apex and the edges' ends in scene.md's pixel frame (converted from the
+    /// The apex and the edges' ends in the conventions' pixel frame (converted from the
     /// CSV's `tracker.pixel_origin`), for drawing on the frames.
     pub tip_px: Option<[f64; 2]>,
     pub edges: [Option<[[f64; 2]; 2]>; 3],
@@ -137,8 +138,8 @@ fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
 }
 
 /// Where the pixels of a session's CSV count from: its configuration's
-/// `tracker.pixel_origin`, or scene.md's centre when the file is missing or does not
-/// load (the replay or run that wrote the CSV would have refused such a file).
+/// `tracker.pixel_origin`, or the pixel centre (the default) when the file is missing or
+/// does not load (the replay or run that wrote the CSV would have refused such a file).
 fn pixel_origin_of(config: &Path) -> PixelOrigin {
     Config::load(config).map_or(PixelOrigin::Centre, |c| c.tracker.pixel_origin)
 }

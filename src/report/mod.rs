@@ -1,9 +1,9 @@
-//! `nanoforce report`: one self-contained HTML page about a session, for people who look
-//! at pictures before numbers. It shows force and angle over time, detection and
-//! confidence over time, the histogram of processing times, a strip of overlay
-//! thumbnails (Figure 8 style) and a summary table (frames, detected, accuracy against
-//! `truth.csv` with `score.py`'s definitions when there is one; loop and latency figures
-//! of a recording). Every plot is also written as a PNG file beside the page.
+//! `nanoforce report`: one self-contained HTML page about a session, for people who look at
+//! pictures before numbers. It shows force and angle over time, detection and confidence
+//! over time, the histogram of processing times, a strip of overlay thumbnails (Figure 8
+//! style) and a summary table (frames, detected, accuracy against `truth.csv` with
+//! `nanoforce score`'s definitions when there is one; loop and latency figures of a
+//! recording). Every plot is also written as a PNG file beside the page.
 //!
 //! - [`load`]: the two session shapes (replayed, recorded) read into one table of frames;
 //! - [`plot`]: the plots, drawn in pure Rust with an embedded font;

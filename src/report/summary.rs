@@ -1,6 +1,6 @@
 //! The report's summary table: (quantity, value) rows, in the order a reader asks:
 //! how many frames, how many detected, how accurate (against `truth.csv`, with
-//! `score.py`'s definitions, or against a simulated run's true force), how fast, and
+//! `nanoforce score`'s definitions, or against a simulated run's true force), how fast, and
 //! for a recording the loop and safety figures of its `stats.json`.
 //!
 //! A number that cannot be known prints as "n/a", never as a non-finite value or a

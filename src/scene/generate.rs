@@ -1,7 +1,7 @@
 //! Generators of whole sessions, deterministic from a seed: random-order mixed sets like
 //! the public `mixed` sample, time sequences like `sequence` (an operator pressing and
 //! releasing, magnification jumps, the probe now and then out of view), and the test
-//! suite that spans every condition of scene.md for the tracker's accuracy tests.
+//! suite that spans every condition of docs/renderer.md for the tracker's accuracy tests.
 
 use super::geometry::Entry;
 use super::rng::{sub_seed, Rng};
@@ -163,7 +163,7 @@ fn drift(setup: &Setup, apex: [f64; 2], rng: &mut Rng) -> [f64; 2] {
 }
 
 /// The tracker's accuracy suite: `sessions` sessions of `frames_per_session` frames
-/// each, together spanning every condition of scene.md: magnification 1000x-8000x
+/// each, together spanning every condition of docs/renderer.md: magnification 1000x-8000x
 /// (log-uniform), both entry sides (alternating), base orientation within +-35 deg,
 /// deflections within +-20 deg, every style in equal shares, blank frames, 640x480 and
 /// (every third session) 1280x960, all in random order. Deterministic from `seed`.

@@ -3,10 +3,10 @@
 //! pyramid tip plus the short overhang of the beam beyond it, which rotates by exactly
 //! the tip slope phi0. This module turns a [`ProbeGeometry`] (micrometres) and a
 //! [`Pose`] (where and how it sits in the frame) into a polygon in pixels and the true
-//! tracked edges (`red`, `blue`, `green` of scene.md).
+//! tracked edges (`red`, `blue`, `green` of docs/conventions.md).
 //!
-//! Conventions (scene.md): pixels x right, y down, origin at the top-left pixel's centre;
-//! angles in degrees, positive counter-clockwise as seen on screen.
+//! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left
+//! pixel's centre; angles in degrees, positive counter-clockwise as seen on screen.
 //!
 //! The elastica runs from the clamp (s = 0) to the back of the pyramid's base (s = L),
 //! where the load from the apex enters the beam; the block beyond is rigid, so the
@@ -28,7 +28,7 @@ pub fn px_per_um(width_px: u32, magnification: f64) -> f64 {
 /// Dimensions of a probe, micrometres and degrees.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProbeGeometry {
-    /// Beam thickness T (scene.md: 1.5 to 4 um).
+    /// Beam thickness T (1.5 to 4 um, docs/conventions.md).
     pub thickness_um: f64,
     /// Pyramid height from the beam's lower face to the apex (9 to 16 um).
     pub pyramid_height_um: f64,
@@ -58,7 +58,7 @@ impl ProbeGeometry {
         }
     }
 
-    /// A random probe within the ranges of scene.md, deterministic from `seed`.
+    /// A random probe within the ranges of docs/conventions.md, deterministic from `seed`.
     pub fn random(seed: u64) -> Self {
         let mut rng = Rng::new(seed);
         ProbeGeometry {
@@ -139,7 +139,7 @@ impl Segment {
     }
 }
 
-/// The three tracked edges of scene.md, in pixels.
+/// The three tracked edges (docs/conventions.md), in pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Edges {
     /// The beam's upper face along the rigid end block, toward the free end.

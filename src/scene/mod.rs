@@ -1,5 +1,6 @@
-//! Synthetic SEM frames with ground truth (issue 3): the scene of scene.md rendered from a
-//! seed, for the tracker's accuracy tests, the simulated lab, benches and the demo.
+//! Synthetic SEM frames with ground truth (issue 3): the SEM scene of docs/renderer.md
+//! rendered from a seed, for the tracker's accuracy tests, the simulated lab, benches and
+//! the demo.
 //!
 //! A [`FrameSpec`] fixes everything about a frame: size, magnification, the probe
 //! ([`ProbeGeometry`]: an elastica-bent beam with a rigid pyramid), its pose (entry side,
@@ -9,9 +10,10 @@
 //! (angle, force, apex, the true red/blue/green edges); the same spec gives the same
 //! bytes on every run.
 //!
-//! [`Session`] writes the on-disk layout of scene.md (probe.toml with calibration clicks,
-//! reference.png, frames/, truth.csv) for random-order mixed sets and time sequences;
-//! [`suite`] generates the tracker's accuracy suite spanning every condition.
+//! [`Session`] writes the session layout of docs/conventions.md (probe.toml with
+//! calibration clicks, reference.png, frames/, truth.csv) for random-order mixed sets and
+//! time sequences; [`suite`] generates the tracker's accuracy suite spanning every
+//! condition.
 //!
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of

@@ -3,7 +3,8 @@
 //! edges are accumulated into a row buffer and prefix-summed, the algorithm of font
 //! rasterisers (font-rs), so the cost is the perimeter plus the covered pixels.
 //!
-//! Coordinates are in pixels with the origin at the top-left pixel's centre (scene.md):
+//! Coordinates are in pixels with the origin at the top-left pixel's centre
+//! (docs/conventions.md):
 //! pixel (i, j) is the square [i - 1/2, i + 1/2] x [j - 1/2, j + 1/2]. Polygons may
 //! extend far outside the frame; they are clipped to it exactly.
 

@@ -1,9 +1,9 @@
-//! Recorded sessions on disk, in the layout of scene.md: `probe.toml` (cantilever,
-//! tracker settings, calibration clicks), `reference.png` (the undeformed probe, angle
-//! zero), `frames/frame_00000.png ...` and `truth.csv`. A [`Session`] is a list of
-//! [`FrameSpec`]s sharing one probe, entry side and base orientation; it is built either
-//! as a random-order mixed set ([`Session::mixed`]) or as a time sequence of an operator
-//! pressing and releasing, with magnification jumps ([`Session::sequence`]).
+//! Recorded sessions on disk, in the layout of docs/conventions.md: `probe.toml`
+//! (cantilever, tracker settings, calibration clicks), `reference.png` (the undeformed
+//! probe, angle zero), `frames/frame_00000.png ...` and `truth.csv`. A [`Session`] is a
+//! list of [`FrameSpec`]s sharing one probe, entry side and base orientation; it is built
+//! either as a random-order mixed set ([`Session::mixed`]) or as a time sequence of an
+//! operator pressing and releasing, with magnification jumps ([`Session::sequence`]).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -250,7 +250,7 @@ pub struct Setup {
 }
 
 impl Setup {
-    /// A random setup (probe within scene.md's ranges, base within +-35 deg).
+    /// A random setup (probe within docs/conventions.md's ranges, base within +-35 deg).
     pub fn random(seed: u64, width: u32, height: u32) -> Self {
         let mut rng = Rng::new(seed);
         let mut probe = ProbeGeometry::random(rng.next_u64());

@@ -96,9 +96,9 @@ impl Style {
 pub struct Look {
     /// Written in truth.csv's `style` column.
     pub style_name: &'static str,
-    /// Standard deviation of the white Gaussian noise (scene.md: up to 30).
+    /// Standard deviation of the white Gaussian noise (SEM frames: up to 30).
     pub noise_sigma: f64,
-    /// Gaussian blur of the beam spot, pixels (scene.md: 0.8 to 1.6; the area
+    /// Gaussian blur of the beam spot, pixels (SEM frames: 0.8 to 1.6; the area
     /// integration of the pixel adds its own 0.29 px).
     pub blur_sigma_px: f64,
     /// Fraction of rows shifted sideways by one pixel (scan-line jitter).
@@ -117,7 +117,7 @@ pub struct Look {
     pub outline_width_px: f64,
     /// How far outside the probe's true outline it is imaged (an SEM's edge effect as a
     /// shift), pixels; the truth keeps the true outline. 0 (every preset) draws it where
-    /// it is, as scene.md does; the public samples' truth reads as about 0.3 px
+    /// it is, as docs/conventions.md does; the public samples' truth reads as about 0.3 px
     /// (docs/tracker.md, "Apex convention").
     pub edge_bias_px: f64,
     /// Number of bright particles.

@@ -8,7 +8,7 @@
 //!   `Pixel Size = 12.3 nm`, `AP_MAG` / `Mag = 2.00 K X`, `AP_WIDTH` / `Width = 114.3 µm`.
 //!
 //! What is missing is derived when possible (pixel size from HFW and the image width and
-//! back; magnification from the 127 mm display width of scene.md's convention). Metadata
+//! back; magnification from the 127 mm display width of docs/conventions.md). Metadata
 //! that cannot be read is never an error: [`SemMetadata::warnings`] says what was wrong
 //! and the affected values stay empty.
 use std::fs::File;
@@ -24,7 +24,8 @@ pub const TAG_FEI: u16 = 34682;
 pub const TAG_FEI_OLD: u16 = 34680;
 /// Zeiss `CZ_SEM` metadata.
 pub const TAG_ZEISS: u16 = 34118;
-/// The display width magnification is quoted for when the SEM does not say (scene.md:
+/// The display width magnification is quoted for when the SEM does not say
+/// (docs/conventions.md:
 /// HFW = 127 mm / magnification).
 pub const DISPLAY_WIDTH_UM: f64 = 127_000.0;
 /// Longest metadata text read; longer tags are truncated (with a warning).

@@ -1,7 +1,7 @@
-//! Recorded sessions on disk (scene.md's layout): listing and decoding the frames of a
-//! folder, the SEM's scale metadata in TIFF frames, the results CSV that `replay` writes
-//! and `score.py` reads, scoring results against a session's truth, and the small
-//! RFC 4180 reader every session CSV is read through.
+//! Recorded sessions on disk (the layout of docs/conventions.md): listing and decoding
+//! the frames of a folder, the SEM's scale metadata in TIFF frames, the results CSV that
+//! `replay` writes and `score` reads, scoring results against a session's truth, and the
+//! small RFC 4180 reader every session CSV is read through.
 pub mod csv;
 pub mod frames;
 pub mod metadata;

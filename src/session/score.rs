@@ -1,15 +1,17 @@
-//! Accuracy of a results CSV against a session's `truth.csv`, with the definitions of
-//! `score.py` (the project's scoring tool): rows are matched by file name; a probe frame
-//! counts as detected when the result says so and has an angle; the angle error's
-//! median, 95th percentile (numpy's linear interpolation) and maximum, and the apex
-//! error's median, over the detected probe frames; empty sets give infinity.
+//! Accuracy of a results CSV against a session's `truth.csv`, the numbers `nanoforce
+//! score` prints and the tests and docs quote: rows are matched by file name; a probe
+//! frame counts as detected when the result says so and has an angle; a frame without
+//! the probe that the result reports detected is a false detection. Over the detected
+//! probe frames: the angle error's median, 95th percentile (linear interpolation between
+//! closest ranks) and maximum, and the same for the apex and force errors; an empty set
+//! gives infinity. docs/conventions.md describes both files.
 use std::collections::HashMap;
 use std::path::Path;
 
 use super::csv::Table;
 use super::results::{ResultRow, ResultsError};
 
-/// One row of a `truth.csv` (scene.md's columns).
+/// One row of a `truth.csv` (docs/conventions.md, "A recorded session on disk").
 #[derive(Debug, Clone, PartialEq)]
 pub struct TruthRow {
     pub frame: String,
@@ -67,7 +69,7 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, ResultsError> {
         .collect())
 }
 
-/// score.py's numbers.
+/// Detection and the angle and apex errors of a results CSV against its truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Score {
     pub frames: usize,
@@ -116,12 +118,80 @@ pub fn score(truth: &[TruthRow], results: &[ResultRow]) -> Score {
     }
 }
 
-/// The file name without folders (score.py compares base names).
+/// Median, 95th percentile and maximum of a set of errors (infinity when empty).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    pub median: f64,
+    pub p95: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    pub fn of(values: &[f64]) -> Self {
+        Spread {
+            median: percentile(values, 50.0),
+            p95: percentile(values, 95.0),
+            max: percentile(values, 100.0),
+        }
+    }
+}
+
+/// Everything `nanoforce score` reports: [`Score`], plus the spread of the apex and
+/// force errors over the detected probe frames and the largest true force.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scorecard {
+    pub score: Score,
+    /// Detected probe frames.
+    pub detected: usize,
+    /// Apex error, pixels (infinity for a detected frame without an apex).
+    pub tip_err_px: Spread,
+    /// |force - true force|, nanonewtons, over the detected probe frames whose truth
+    /// has a force (infinity for such a frame without a force in the results).
+    pub force_err_nn: Spread,
+    /// The largest |true force| over the probe frames, nanonewtons (0 without any).
+    pub true_force_peak_nn: f64,
+}
+
+/// Scores `results` against `truth` in full; [`Scorecard::score`] is [`score`]'s.
+pub fn scorecard(truth: &[TruthRow], results: &[ResultRow]) -> Scorecard {
+    let by_name: HashMap<&str, &ResultRow> =
+        results.iter().map(|r| (base_name(&r.frame), r)).collect();
+    let (mut detected, mut tip_err, mut force_err) = (0, Vec::new(), Vec::new());
+    let mut true_force_peak_nn: f64 = 0.0;
+    for t in truth.iter().filter(|t| t.detected) {
+        if t.force_nn.is_finite() {
+            true_force_peak_nn = true_force_peak_nn.max(t.force_nn.abs());
+        }
+        let Some(r) = by_name
+            .get(base_name(&t.frame))
+            .filter(|r| r.detected && r.angle_deg.is_some())
+        else {
+            continue;
+        };
+        detected += 1;
+        tip_err.push(r.tip_px.map_or(f64::INFINITY, |p| {
+            (p[0] - t.tip_px[0]).hypot(p[1] - t.tip_px[1])
+        }));
+        if t.force_nn.is_finite() {
+            force_err.push(r.force_nn.map_or(f64::INFINITY, |f| (f - t.force_nn).abs()));
+        }
+    }
+    Scorecard {
+        score: score(truth, results),
+        detected,
+        tip_err_px: Spread::of(&tip_err),
+        force_err_nn: Spread::of(&force_err),
+        true_force_peak_nn,
+    }
+}
+
+/// The file name without folders: rows are matched by base name.
 fn base_name(frame: &str) -> &str {
     frame.rsplit(['/', '\\']).next().unwrap_or(frame)
 }
 
-/// numpy's default (linear) percentile; infinity for no values.
+/// The `q`-th percentile, interpolated linearly between closest ranks (numpy's
+/// default); infinity for no values.
 pub fn percentile(values: &[f64], q: f64) -> f64 {
     if values.is_empty() {
         return f64::INFINITY;
@@ -175,7 +245,7 @@ mod tests {
     }
 
     #[test]
-    fn scores_as_score_py_does() {
+    fn scores_by_base_name_and_counts_misses() {
         let t = [
             truth("a.png", true, 1.0, [10.0, 10.0]),
             truth("b.png", true, -2.0, [20.0, 20.0]),
@@ -202,5 +272,42 @@ mod tests {
         let none = score(&t, &[]);
         assert_eq!(none.detect_rate, 0.0);
         assert_eq!(none.angle_err_median_deg, f64::INFINITY);
+    }
+
+    #[test]
+    fn scorecard_adds_apex_and_force_spreads() {
+        let mut t = vec![
+            truth("a.png", true, 1.0, [10.0, 10.0]),
+            truth("b.png", true, 2.0, [20.0, 20.0]),
+            truth("c.png", true, 3.0, [30.0, 30.0]),
+            truth("d.png", false, f64::NAN, [f64::NAN; 2]),
+        ];
+        for (row, force) in t.iter_mut().zip([100.0, -400.0, 900.0, f64::NAN]) {
+            row.force_nn = force;
+        }
+        let mut r = vec![
+            result("a.png", Some(1.0), Some([13.0, 14.0])),
+            result("b.png", Some(2.0), Some([20.0, 21.0])),
+            result("c.png", None, None),
+            result("d.png", None, None),
+        ];
+        r[0].force_nn = Some(110.0);
+        r[1].force_nn = Some(-370.0);
+        let card = scorecard(&t, &r);
+        assert_eq!(card.score, score(&t, &r));
+        assert_eq!(card.detected, 2);
+        assert_eq!((card.tip_err_px.median, card.tip_err_px.max), (3.0, 5.0));
+        assert_eq!(card.force_err_nn.median, 20.0);
+        assert_eq!(card.force_err_nn.max, 30.0);
+        assert!((card.force_err_nn.p95 - 29.0).abs() < 1e-12);
+        assert_eq!(card.true_force_peak_nn, 900.0);
+        // A detected frame without a force is an infinite force error.
+        r[1].force_nn = None;
+        assert_eq!(scorecard(&t, &r).force_err_nn.max, f64::INFINITY);
+        let none = scorecard(&t, &[]);
+        assert_eq!(
+            (none.detected, none.force_err_nn.median),
+            (0, f64::INFINITY)
+        );
     }
 }

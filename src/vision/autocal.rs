@@ -64,7 +64,7 @@ pub enum AutoCalError {
     Calibration(#[from] VisionError),
 }
 
-/// Three points on each edge, found from the apex (frame pixels, scene.md's origin).
+/// Three points on each edge, found from the apex (frame pixels, the conventions' origin).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AutoClicks {
     pub red: Vec<[f64; 2]>,

@@ -12,7 +12,7 @@ use crate::model::{Cantilever, ModelTable};
 /// How much of the beam edge (in tip heights from the free end) is fitted: all of it
 /// that is in view, in practice; the bend term takes care of its curvature.
 pub const RED_SPAN_HEIGHTS: f64 = 4.0;
-/// Typical distance from the apex to the beam's upper face, micrometres (scene.md:
+/// Typical distance from the apex to the beam's upper face, micrometres (conventions.md:
 /// pyramid 9-16 um plus beam 1.5-4 um).
 const TIP_HEIGHT_UM: f64 = 14.5;
 

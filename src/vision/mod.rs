@@ -23,7 +23,7 @@
 //!   calibration;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
 //!
-//! Conventions are scene.md's: pixels x right, y down, origin at the top-left pixel's
+//! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
 
 mod autocal;
@@ -187,7 +187,7 @@ pub struct Estimate {
 
 impl Estimate {
     /// The estimate with its pixels (apex, edge ends) counted from `origin`, for the
-    /// numbers nanoforce writes out; drawing and tracking keep scene.md's frame.
+    /// numbers nanoforce writes out; drawing and tracking keep the pixel centre's.
     pub fn with_pixel_origin(mut self, origin: PixelOrigin) -> Estimate {
         self.apex_px = self.apex_px.map(|a| origin.output(a));
         for fit in self.edges.iter_mut().flatten() {

@@ -45,7 +45,7 @@ const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 type Vec3Mask = [bool; 3];
 
 /// Blur (pixels) the coarse fit's bands are sized for, at least: SEM frames range from
-/// 0.8 to 1.6 (scene.md).
+/// 0.8 to 1.6 (docs/renderer.md).
 const START_BLUR_PX: f64 = 1.4;
 
 /// An edge a hypothesis left out is fitted only if the edge map covers this share of it.
@@ -162,7 +162,7 @@ impl Tracker {
         &self.calibration
     }
 
-    /// Where the configuration counts pixels from: estimates are in scene.md's frame,
+    /// Where the configuration counts pixels from: estimates are in the conventions' frame,
     /// and what writes them out converts with [`Estimate::with_pixel_origin`].
     pub fn pixel_origin(&self) -> PixelOrigin {
         self.pixel_origin

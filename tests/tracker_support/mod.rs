@@ -1,7 +1,7 @@
 //! Test-only scoring helpers shared by the tracker tests: read a session (config,
 //! reference, frames, truth), run a tracker over it, and score the estimates the way
-//! `score.py` does (detection rate, false detections, angle error median / p95 / max,
-//! apex error median).
+//! `nanoforce score` does (detection rate, false detections, angle error median / p95 /
+//! max, apex error median).
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -123,7 +123,7 @@ pub fn angle_rms_deg(truth: &[Truth], est: &[Estimate]) -> f64 {
     (err.iter().map(|e| e * e).sum::<f64>() / err.len().max(1) as f64).sqrt()
 }
 
-/// score.py's numbers for estimates in truth order (rendered sessions repeat frame
+/// `nanoforce score`'s numbers for estimates in truth order (rendered sessions repeat frame
 /// names, so rows are paired by position rather than by name as the library does).
 pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {
     let positives = truth.iter().filter(|t| t.detected).count();
@@ -159,7 +159,7 @@ pub fn score(truth: &[Truth], est: &[Estimate]) -> Score {
     }
 }
 
-/// A result CSV in the layout score.py reads.
+/// A result CSV in the layout `nanoforce score` reads.
 pub fn result_csv(truth: &[Truth], est: &[Estimate]) -> String {
     let mut out = String::from("frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence\n");
     for (t, e) in truth.iter().zip(est) {

@@ -70,7 +70,7 @@ const ALONG_UNIT_PX: f64 = 100.0;
 /// Prior standard deviation of the grey-level slope along an edge on the probe's side
 /// (level slope plus contrast slope), grey levels per [`ALONG_UNIT_PX`], around zero.
 /// The charged probe is evenly bright but for slow shading and a brightness ramp across
-/// the field (scene.md; about 2 per 100 px in the public samples). A short edge's free
+/// the field (SEM frames; about 2 per 100 px in the public samples). A short edge's free
 /// slopes trade against its rotation (a turn looks partly like a level ramp across a
 /// band a few blurs wide); a long edge measures them far better than this and is not
 /// held. The outside's slope stays free: particles and the substrate make the
