@@ -114,7 +114,9 @@ fn check_against_csv(v: &Value, key: &str, cell: &str, known: bool, tolerance: f
         return;
     }
     let got = number(v, key);
-    let want: f64 = cell.parse().unwrap_or_else(|_| panic!("{key}: csv {cell:?}"));
+    let want: f64 = cell
+        .parse()
+        .unwrap_or_else(|_| panic!("{key}: csv {cell:?}"));
     assert!(
         (got - want).abs() <= tolerance * want.abs().max(1.0),
         "{key}: datagram {got}, estimates.csv {want}"
@@ -137,8 +139,7 @@ fn parse_utc(text: &str) -> f64 {
     let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
     let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
     let days = era * 146_097 + doe - 719_468;
-    (days * 86_400 + n(11..13) * 3600 + n(14..16) * 60 + n(17..19)) as f64
-        + n(20..26) as f64 * 1e-6
+    (days * 86_400 + n(11..13) * 3600 + n(14..16) * 60 + n(17..19)) as f64 + n(20..26) as f64 * 1e-6
 }
 
 #[test]
@@ -157,7 +158,10 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
     assert_eq!(csv.len() as u64, published, "estimates.csv holds the run");
     let streamed = stats.stream.expect("stream stats");
     eprintln!("{streamed:?}; {published} estimates published");
-    assert_eq!((streamed.estimates_dropped, streamed.haptic_dropped), (0, 0));
+    assert_eq!(
+        (streamed.estimates_dropped, streamed.haptic_dropped),
+        (0, 0)
+    );
     assert_eq!(streamed.send_errors, 0);
 
     let (estimates, haptic): (Vec<_>, Vec<_>) =
@@ -177,7 +181,10 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
     for (received_unix_s, v) in &estimates {
         let seq = v["seq"].as_u64().unwrap_or_else(|| panic!("seq: {v}"));
         let row = &csv[&seq];
-        assert_eq!(v["frame_seq"].as_u64().map(|s| s.to_string()), Some(row["frame_seq"].clone()));
+        assert_eq!(
+            v["frame_seq"].as_u64().map(|s| s.to_string()),
+            Some(row["frame_seq"].clone())
+        );
         let is_detected = v["detected"].as_bool().unwrap_or_else(|| panic!("{v}"));
         assert_eq!(row["detected"], if is_detected { "1" } else { "0" });
         detected += usize::from(is_detected);
@@ -200,8 +207,15 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
         let utc_s = parse_utc(v["utc"].as_str().unwrap_or_else(|| panic!("utc: {v}")));
         assert!((utc_s - unix_s).abs() < 2e-6, "{v}");
         let age_s = received_unix_s - unix_s;
-        assert!((0.0..1.0).contains(&age_s), "arrived {age_s} s after capture: {v}");
-        assert_eq!(v.as_object().unwrap().len(), 13, "no field more or less: {v}");
+        assert!(
+            (0.0..1.0).contains(&age_s),
+            "arrived {age_s} s after capture: {v}"
+        );
+        assert_eq!(
+            v.as_object().unwrap().len(),
+            13,
+            "no field more or less: {v}"
+        );
     }
     assert!(detected as f64 > 0.9 * estimates.len() as f64, "{detected}");
     // One timebase: wall-clock differences are daemon-clock differences.
@@ -218,7 +232,10 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
     let over_run_hz = haptic.len() as f64 / stats.duration_s;
     eprintln!("haptic stream: {rate_hz:.1} Hz over its span, {over_run_hz:.1} Hz over the run");
     assert!((rate_hz / HAPTIC_HZ - 1.0).abs() <= 0.1, "{rate_hz}");
-    assert!((over_run_hz / HAPTIC_HZ - 1.0).abs() <= 0.1, "{over_run_hz}");
+    assert!(
+        (over_run_hz / HAPTIC_HZ - 1.0).abs() <= 0.1,
+        "{over_run_hz}"
+    );
     assert_eq!(streamed.haptic_sent, haptic.len() as u64);
     for (i, (_, v)) in haptic.iter().enumerate() {
         assert_eq!(v["seq"].as_u64(), Some(i as u64 + 1), "no gaps: {v}");
@@ -229,19 +246,36 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
         );
         for key in ["position_mm", "stylus_force_N", "stage_velocity_um_s"] {
             let axes = v[key].as_array().unwrap_or_else(|| panic!("{key}: {v}"));
-            assert!(axes.len() == 3 && axes.iter().all(Value::is_f64), "{key}: {v}");
+            assert!(
+                axes.len() == 3 && axes.iter().all(Value::is_f64),
+                "{key}: {v}"
+            );
         }
         // The simulated stylus stays inside a PHANToM's workspace and force range.
-        assert!(v["position_mm"].as_array().unwrap().iter().all(|p| p.as_f64().unwrap().abs() < 200.0));
-        assert!(v["stylus_force_N"].as_array().unwrap().iter().all(|f| f.as_f64().unwrap().abs() < 10.0));
+        assert!(v["position_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|p| p.as_f64().unwrap().abs() < 200.0));
+        assert!(v["stylus_force_N"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|f| f.as_f64().unwrap().abs() < 10.0));
         number(v, "rendered_force_nN");
         number(v, "unix_s");
         parse_utc(v["utc"].as_str().unwrap());
         assert!(v["press_blocked"].is_boolean(), "{v}");
         assert_eq!(v.as_object().unwrap().len(), 11, "{v}");
     }
-    let engaged = haptic.iter().filter(|(_, v)| v["state"] == "engaged").count();
-    assert!(engaged > haptic.len() / 2, "the simulated operator engaged: {engaged}");
+    let engaged = haptic
+        .iter()
+        .filter(|(_, v)| v["state"] == "engaged")
+        .count();
+    assert!(
+        engaged > haptic.len() / 2,
+        "the simulated operator engaged: {engaged}"
+    );
 }
 
 #[test]
@@ -263,7 +297,14 @@ fn a_remote_receiver_needs_allow_remote() {
     let path = dir.path().join("lab.toml");
     std::fs::write(&path, &text).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_nanoforce"))
-        .args(["run", "--no-record", "--quiet", "--duration-s", "1", "--config"])
+        .args([
+            "run",
+            "--no-record",
+            "--quiet",
+            "--duration-s",
+            "1",
+            "--config",
+        ])
         .arg(&path)
         .output()
         .unwrap();
@@ -281,20 +322,27 @@ fn a_remote_receiver_needs_allow_remote() {
 fn nobody_listening_is_counted_and_the_run_goes_on() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
     // A port nobody listens on: bind one, note it, close it.
-    let free = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    let free = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
     let (stats, _session) = run_lab(&sim_text(&free.to_string(), 100.0), 1.5);
     let streamed = stats.stream.expect("stream stats");
     eprintln!("{streamed:?}");
     assert!(streamed.send_errors > 10, "{streamed:?}");
-    assert!(stats.frames.tracked > 30 && stats.haptic_loop.ticks > 1000, "{stats:?}");
+    assert!(
+        stats.frames.tracked > 30 && stats.haptic_loop.ticks > 1000,
+        "{stats:?}"
+    );
     assert_eq!(stats.safety.faults, 0);
 }
 
 /// The reader in docs/stream.md, run as it is printed there.
 #[test]
 fn the_documented_python_reader_reads_the_stream() {
-    let docs = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/stream.md"))
-        .unwrap();
+    let docs =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/stream.md"))
+            .unwrap();
     let script = docs
         .split("```python\n")
         .nth(1)
@@ -310,7 +358,11 @@ fn the_documented_python_reader_reads_the_stream() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("reader.py");
     std::fs::write(&path, script).unwrap();
-    let port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     const COUNT: u64 = 40;
     let mut child = Command::new(python)
         .arg(&path)
@@ -321,7 +373,10 @@ fn the_documented_python_reader_reads_the_stream() {
     let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
     // The header is printed once the socket is bound.
     let header = lines.next().unwrap().unwrap();
-    assert_eq!(header, "utc,t_s,seq,detected,force_nN,angle_deg,tip_x,tip_y");
+    assert_eq!(
+        header,
+        "utc,t_s,seq,detected,force_nN,angle_deg,tip_x,tip_y"
+    );
 
     let config = stream::StreamConfig {
         udp: Some(format!("127.0.0.1:{port}").parse().unwrap()),
@@ -338,9 +393,21 @@ fn the_documented_python_reader_reads_the_stream() {
             frame_time_s: clock.now_s(),
             published_s: clock.now_s(),
             detected,
-            angle_deg: if detected { 0.01 * seq as f64 } else { f64::NAN },
-            force_nn: if detected { 25.0 * seq as f64 } else { f64::NAN },
-            apex_px: if detected { [300.0, 200.0] } else { [f64::NAN; 2] },
+            angle_deg: if detected {
+                0.01 * seq as f64
+            } else {
+                f64::NAN
+            },
+            force_nn: if detected {
+                25.0 * seq as f64
+            } else {
+                f64::NAN
+            },
+            apex_px: if detected {
+                [300.0, 200.0]
+            } else {
+                [f64::NAN; 2]
+            },
             confidence: 0.9,
             angle_sigma_deg: f64::NAN,
         };
