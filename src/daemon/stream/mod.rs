@@ -265,18 +265,24 @@ impl Sender {
             }
             thread::park_timeout(DRAIN_EVERY);
         }
-        self.errors.finish(self.target);
+        if let Some(line) = self.errors.finish(self.target) {
+            tracing::warn!("{line}");
+        }
     }
 
     fn send(&mut self, datagram: &[u8]) -> bool {
         match self.socket.send(datagram) {
             Ok(_) => {
-                self.errors.resumed(self.target);
+                if let Some(line) = self.errors.sent(self.target, Instant::now()) {
+                    tracing::info!("{line}");
+                }
                 true
             }
             Err(e) => {
                 self.shared.send_errors.fetch_add(1, Ordering::Relaxed);
-                self.errors.failed(self.target, &e, Instant::now());
+                if let Some(line) = self.errors.failed(self.target, &e, Instant::now()) {
+                    tracing::warn!("{line}");
+                }
                 false
             }
         }
@@ -289,54 +295,71 @@ fn count(sent: bool, counter: &AtomicU64) {
     }
 }
 
-/// Logs failed sends: the first at once, then at most one line per [`ERROR_LOG_EVERY`]
-/// with the count since the last line; and once when sends succeed again.
+/// What to log about sends: the first failure at once, then at most one line per
+/// [`ERROR_LOG_EVERY`] with the count since the last line, and one line once sends have
+/// gone through for that long again. (A success alone says little: on loopback the
+/// kernel reports a missing receiver on the send after the refused one, so sends
+/// alternate while nobody listens.)
 #[derive(Debug, Default)]
 struct ErrorLog {
     last_line: Option<Instant>,
+    /// The newest failure while failing; None once sends go through again.
+    last_error: Option<Instant>,
     unlogged: u64,
-    failing: bool,
 }
 
 impl ErrorLog {
-    fn failed(&mut self, target: SocketAddr, error: &io::Error, now: Instant) {
-        self.failing = true;
+    fn failed(&mut self, target: SocketAddr, error: &io::Error, now: Instant) -> Option<String> {
         self.unlogged += 1;
+        let starting = self.last_error.is_none();
+        self.last_error = Some(now);
         if self
             .last_line
             .is_some_and(|t| now.duration_since(t) < ERROR_LOG_EVERY)
         {
-            return;
+            return None;
         }
-        if self.last_line.is_none() {
-            tracing::warn!(
-                "stream: sending to {target} failed: {error}; datagrams are dropped until a \
+        let line = if starting && self.unlogged == 1 {
+            format!(
+                "stream: sending to {target} failed: {error}; datagrams are lost until a \
                  receiver listens there (the run goes on)"
-            );
+            )
         } else {
-            tracing::warn!(
+            format!(
                 "stream: {} datagrams to {target} failed since the last report (last: {error})",
                 self.unlogged
-            );
-        }
+            )
+        };
         self.unlogged = 0;
         self.last_line = Some(now);
+        Some(line)
     }
 
-    fn resumed(&mut self, target: SocketAddr) {
-        if self.failing {
-            self.failing = false;
-            tracing::info!("stream: {target} receives again");
+    fn sent(&mut self, target: SocketAddr, now: Instant) -> Option<String> {
+        let since = now.duration_since(self.last_error?);
+        if since < ERROR_LOG_EVERY {
+            return None;
         }
+        self.last_error = None;
+        let unlogged = std::mem::take(&mut self.unlogged);
+        let earlier = if unlogged > 0 {
+            format!(" ({unlogged} more datagrams had failed before)")
+        } else {
+            String::new()
+        };
+        Some(format!(
+            "stream: no send errors to {target} for {} s: a receiver listens there{earlier}",
+            ERROR_LOG_EVERY.as_secs()
+        ))
     }
 
-    fn finish(&self, target: SocketAddr) {
-        if self.unlogged > 0 {
-            tracing::warn!(
+    fn finish(&self, target: SocketAddr) -> Option<String> {
+        (self.unlogged > 0).then(|| {
+            format!(
                 "stream: {} datagrams to {target} failed since the last report",
                 self.unlogged
-            );
-        }
+            )
+        })
     }
 }
 
@@ -360,6 +383,37 @@ mod tests {
         assert!(tap.due(1.1));
         assert!(!tap.due(1.101));
         assert!(tap.due(1.104));
+    }
+
+    #[test]
+    fn send_errors_are_logged_at_a_limited_rate() {
+        let target: SocketAddr = "127.0.0.1:9870".parse().unwrap();
+        let refused = io::Error::from(io::ErrorKind::ConnectionRefused);
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        let mut log = ErrorLog::default();
+        // Nobody listening for 25 s at 100 datagrams/s: sends alternate.
+        let mut lines = Vec::new();
+        for k in 0..2500u64 {
+            let line = if k % 2 == 0 {
+                log.sent(target, at(10 * k))
+            } else {
+                log.failed(target, &refused, at(10 * k))
+            };
+            lines.extend(line);
+        }
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        assert!(lines[0].contains("failed: ") && lines[0].contains("the run goes on"));
+        assert!(lines[1].starts_with("stream: 500 datagrams to 127.0.0.1:9870 failed"));
+        // A receiver appears: one line once 10 s passed without an error.
+        assert_eq!(log.sent(target, at(25_000)), None);
+        let back = log.sent(target, at(35_000)).unwrap();
+        assert!(
+            back.ends_with("a receiver listens there (249 more datagrams had failed before)"),
+            "{back}"
+        );
+        assert_eq!(log.sent(target, at(36_000)), None);
+        assert_eq!(log.finish(target), None);
     }
 
     #[test]
