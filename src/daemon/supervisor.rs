@@ -471,11 +471,21 @@ fn spawn_threads(
     let (est_tx, est_rx) = rtrb::RingBuffer::new(ESTIMATE_RING);
     let (gains_tx, gains_rx) = rtrb::RingBuffer::new(4);
     let (events_tx, events_rx) = mpsc::channel();
-    let stream_shared = options
-        .stream
-        .udp
-        .map(|_| Arc::new(StreamShared::default()));
-    // The monitor first: it only reads, and a port in use stops the start right here.
+    // The stream and the monitor first: they only read, and a socket refused or a port
+    // in use stops the start right here (a stream not yet joined stops as it drops).
+    let (stream, estimate_tap, haptic_tap) = match options.stream.udp {
+        Some(addr) => {
+            let shared = Arc::new(StreamShared::default());
+            let started = stream::start(&options.stream, shared, clock, options.pixel_origin)
+                .with_context(|| format!("starting the data stream to {addr} ([stream] udp)"))?;
+            (
+                Some(started.handle),
+                Some(started.estimates),
+                started.haptic,
+            )
+        }
+        None => (None, None, None),
+    };
     let (snapshots, monitor) = match &options.monitor {
         Some(config) if config.wants_snapshots(options.session_dir.is_some()) => {
             let (tap, reader) = snapshot_channel(config.frame_hz);
@@ -483,7 +493,7 @@ fn spawn_threads(
                 loop_shared: loop_shared.clone(),
                 pipeline_shared: pipeline_shared.clone(),
                 recording: recording.clone(),
-                stream: stream_shared.clone(),
+                stream: stream.as_ref().map(|s| s.shared.clone()),
                 inject: options.inject.clone(),
             };
             let handle = monitor::start(config, reader, view, options.session_dir.clone())
@@ -513,18 +523,6 @@ fn spawn_threads(
         None => None,
     };
 
-    let (stream, estimate_tap, haptic_tap) = match (&options.stream.udp, stream_shared) {
-        (Some(addr), Some(shared)) => {
-            let started = stream::start(&options.stream, shared, clock, options.pixel_origin)
-                .with_context(|| format!("starting the data stream to {addr} ([stream] udp)"))?;
-            (
-                Some(started.handle),
-                Some(started.estimates),
-                started.haptic,
-            )
-        }
-        _ => (None, None, None),
-    };
     let tracker = {
         let shared = pipeline_shared.clone();
         let side = TrackerSide {
