@@ -15,6 +15,8 @@ use serde::{Deserialize, Deserializer};
 
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
 use crate::daemon::config::{DaemonConfig, RawDaemon};
+use crate::daemon::stream::config::RawStream;
+use crate::daemon::stream::StreamConfig;
 use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
 use crate::monitor::config::{MonitorConfig, RawMonitor};
@@ -180,6 +182,8 @@ pub struct Config {
     pub daemon: DaemonConfig,
     /// `[monitor]`: the live web page (off by default) and recorded thumbnails.
     pub monitor: MonitorConfig,
+    /// `[stream]`: the live data stream over UDP (off by default).
+    pub stream: StreamConfig,
     /// `[sim]`: the simulated lab, used by every `"sim"` backend.
     pub sim: SimConfig,
 }
@@ -337,6 +341,7 @@ struct RawConfig {
     haptic: Option<RawDevice>,
     daemon: Option<RawDaemon>,
     monitor: Option<RawMonitor>,
+    stream: Option<RawStream>,
     sim: Option<RawSim>,
 }
 
@@ -414,6 +419,7 @@ impl Config {
         )?;
         let daemon = DaemonConfig::validate(raw.daemon.unwrap_or_default(), &check)?;
         let monitor = MonitorConfig::validate(raw.monitor.unwrap_or_default(), &check)?;
+        let stream = StreamConfig::validate(raw.stream.unwrap_or_default(), &check)?;
         let sim = SimConfig::validate(raw.sim.unwrap_or_default(), &check)?;
         Ok(Config {
             path: path.to_path_buf(),
@@ -423,6 +429,7 @@ impl Config {
             devices,
             daemon,
             monitor,
+            stream,
             sim,
         })
     }

@@ -1,6 +1,7 @@
 //! The 1 kHz loop must not allocate in steady state. A counting global allocator counts
 //! allocations made on the haptic loop's thread only (the fake haptic device marks that
 //! thread on its first read); the devices here are atomics-only so they add nothing.
+//! The live data stream is on, its haptic state at the loop's full rate.
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -8,6 +9,7 @@ use std::time::Duration;
 use image::GrayImage;
 use nalgebra::Vector3;
 use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
+use nanoforce::daemon::stream::StreamConfig;
 use nanoforce::daemon::{Daemon, Devices, Estimator, FrameEstimate, LoopOptions, RunOptions};
 use nanoforce::hw::daq::{DaqError, RateOutput};
 use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
@@ -109,8 +111,13 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
         stage: Box::new(Stage(velocity.clone())),
         haptic: Box::new(Haptic),
     };
+    let receiver = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let options = RunOptions {
         clock,
+        stream: StreamConfig {
+            udp: Some(receiver.local_addr().unwrap()),
+            haptic_hz: 1000.0,
+        },
         loop_options: LoopOptions {
             rt_priority: None,
             lock_memory: false,
@@ -132,7 +139,8 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
     let held = handle.loop_shared.gate_held.load(Ordering::SeqCst);
     assert!(held > 0, "the gate's held path ran too");
     handle.stop();
-    handle.wait().unwrap();
+    let streamed = handle.wait().unwrap().stats.stream.unwrap();
+    assert!(streamed.haptic_sent > 400, "the stream ran: {streamed:?}");
     assert!(ticks > 400, "the loop ran ({ticks} ticks)");
     assert!(
         f64::from_bits(velocity.load(Ordering::SeqCst)) > 0.0,

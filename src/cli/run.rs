@@ -165,6 +165,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         pixel_origin: config.tracker.pixel_origin,
         recordings_budget: budget,
         recording_error,
+        stream: config.stream.clone(),
         inject,
     };
     let handle = Daemon::start(config.teleop.clone(), devices, options)?;
@@ -308,6 +309,7 @@ fn restart_sections(running: &Config, new: &Config) -> Vec<&'static str> {
     check("haptic", running.devices.haptic == new.devices.haptic);
     check("daemon", running.daemon == new.daemon);
     check("monitor", running.monitor == new.monitor);
+    check("stream", running.stream == new.stream);
     check("sim", running.sim == new.sim);
     changed
 }

@@ -15,6 +15,7 @@ use nalgebra::Vector3;
 
 use super::rt;
 use super::stats::Histogram;
+use super::stream::HapticTap;
 use super::PublishedEstimate;
 use crate::control::{
     Controller, GateCounters, PressBlock, SafetyCounters, SafetyState, TeleopGains, TickInput,
@@ -156,6 +157,8 @@ pub struct HapticLoop {
     pub telemetry: rtrb::Producer<TickRecord>,
     pub shared: Arc<LoopShared>,
     pub options: LoopOptions,
+    /// The live data stream's ring for the decimated haptic state (None: not streamed).
+    pub stream: Option<HapticTap>,
 }
 
 impl HapticLoop {
@@ -183,6 +186,7 @@ impl HapticLoop {
             telemetry,
             shared,
             options,
+            stream: None,
         }
     }
 
@@ -340,7 +344,9 @@ impl HapticLoop {
             out.press_block == Some(PressBlock::SlowFrames),
             Ordering::Relaxed,
         );
-        if tick.is_multiple_of(u64::from(self.options.telemetry_every.max(1))) {
+        let telemetry_due = tick.is_multiple_of(u64::from(self.options.telemetry_every.max(1)));
+        let stream_due = self.stream.as_mut().is_some_and(|s| s.due(now_s));
+        if telemetry_due || stream_due {
             let record = TickRecord {
                 t_s: now_s,
                 period_us,
@@ -353,8 +359,11 @@ impl HapticLoop {
                 gate_held: gate.held,
                 gate_attenuated: gate.attenuated,
             };
-            if self.telemetry.push(record).is_err() {
+            if telemetry_due && self.telemetry.push(record).is_err() {
                 shared.telemetry_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            if let Some(stream) = self.stream.as_mut().filter(|_| stream_due) {
+                stream.offer(record);
             }
         }
     }

@@ -5,6 +5,8 @@
 //! - `tracker`: the vision tracker turns the newest frame into a published estimate;
 //! - `haptic-loop`: the 1 kHz loop (stylus -> law -> force and S100 rate command);
 //! - `telemetry`: drains the loops' records into the session folder;
+//! - `stream` (when `[stream]` asks for it): the live UDP data stream of estimates and
+//!   the haptic state, fed through wait-free rings;
 //! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
 //!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
 //! - the supervisor, on a small tokio runtime: signals (SIGHUP reloads the gains;
@@ -29,6 +31,7 @@ pub mod pipeline;
 pub mod rt;
 pub mod snapshot;
 pub mod stats;
+pub mod stream;
 mod supervisor;
 mod supervisor_health;
 pub mod telemetry;

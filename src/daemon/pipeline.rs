@@ -15,6 +15,7 @@ use image::GrayImage;
 
 use super::snapshot::{EdgeSegments, SnapshotTap};
 use super::stats::{ForceErrors, Histogram};
+use super::stream::EstimateTap;
 use super::{FrameEstimate, PublishedEstimate};
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
 use crate::hw::Clock;
@@ -148,6 +149,8 @@ pub struct TrackerSide {
     pub telemetry: rtrb::Producer<EstimateRecord>,
     /// Copies for the monitor and thumbnails (see [`super::snapshot`]), when wanted.
     pub snapshots: Option<SnapshotTap>,
+    /// The live data stream's ring (see [`super::stream`]), when `[stream]` is on.
+    pub stream: Option<EstimateTap>,
 }
 
 /// Runs the tracker loop on the calling thread (spawned by the supervisor as `tracker`).
@@ -173,6 +176,9 @@ pub fn run_tracker(
         seq += 1;
         let published = PublishedEstimate::new(seq, &frame.meta, published_s, &estimate);
         side.estimates.write(published);
+        if let Some(stream) = side.stream.as_mut() {
+            stream.offer(&published);
+        }
         latency_ms.record((published_s - frame.available_s) * 1e3);
         shared.tracked.fetch_add(1, Ordering::Relaxed);
         if published.detected {

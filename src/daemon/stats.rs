@@ -3,6 +3,8 @@
 //! report built from them.
 use serde::Serialize;
 
+use super::stream::StreamStats;
+
 /// A histogram of non-negative values with fixed-width bins, allocated once.
 #[derive(Debug, Clone)]
 pub struct Histogram {
@@ -108,6 +110,8 @@ pub struct RunStats {
     pub stop: StopStats,
     /// Whether the session folder holds the whole run.
     pub recording: RecordingStats,
+    /// The live data stream's datagrams (`[stream]`); null when it is off.
+    pub stream: Option<StreamStats>,
 }
 
 /// How the run ended.
@@ -298,6 +302,11 @@ mod tests {
                 state: "stopped".into(),
                 error: Some("No space left on device".into()),
             },
+            stream: Some(StreamStats {
+                estimates_sent: 59,
+                estimates_dropped: 1,
+                ..StreamStats::default()
+            }),
         };
         let json = serde_json::to_value(&stats).unwrap();
         assert_eq!(json["haptic_loop"]["period_us_p99"], 1010.5);
@@ -307,6 +316,8 @@ mod tests {
         assert_eq!(json["safety"]["gate_attenuated"], 0);
         assert_eq!(json["stop"]["reason"], "SIGABRT");
         assert_eq!(json["recording"]["state"], "stopped");
+        assert_eq!(json["stream"]["estimates_dropped"], 1);
+        assert_eq!(json["stream"]["send_errors"], 0);
     }
 
     #[test]

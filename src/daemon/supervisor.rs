@@ -19,6 +19,7 @@ use super::stats::{
     ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RecordingStats, RunStats,
     SafetyStats, StopStats,
 };
+use super::stream::{self, StreamConfig, StreamHandle, StreamShared};
 use super::supervisor_health::Health;
 use super::telemetry::{self, Budget, Recorder, RecordingStatus};
 use super::PublishedEstimate;
@@ -64,6 +65,8 @@ pub struct RunOptions {
     pub recordings_budget: Option<Budget>,
     /// Why there is no session folder although one was asked for (a full disk at start).
     pub recording_error: Option<String>,
+    /// `[stream]`: the live UDP data stream (off unless its `udp` is set).
+    pub stream: StreamConfig,
     /// A panic to inject (tests only; None in every normal run).
     pub inject: Option<PanicInjection>,
 }
@@ -93,6 +96,7 @@ impl Default for RunOptions {
             pixel_origin: PixelOrigin::Centre,
             recordings_budget: None,
             recording_error: None,
+            stream: StreamConfig::default(),
             inject: None,
         }
     }
@@ -208,6 +212,7 @@ struct Threads {
     events: mpsc::Sender<String>,
     gains: rtrb::Producer<TeleopGains>,
     monitor: Option<MonitorHandle>,
+    stream: Option<StreamHandle>,
     loop_shared: Arc<LoopShared>,
     pipeline_shared: Arc<PipelineShared>,
     /// Set once the haptic loop has ended (its outputs zeroed, forces off).
@@ -312,6 +317,14 @@ impl Threads {
         }
         if let Some(monitor) = self.monitor.take() {
             monitor.stop();
+        }
+        // The loops have ended: the stream sends what they queued, then ends.
+        if let Some(handle) = self.stream.take().and_then(StreamHandle::stop) {
+            match join_within(handle, JOIN_LIMIT) {
+                Some(Ok(())) => {}
+                Some(Err(message)) => tracing::error!("stream thread panicked: {message}"),
+                None => tracing::warn!("the stream thread did not end; not waiting for it"),
+            }
         }
         // A frame source may be blocked in a read (a pipe): give it a moment, then leave it.
         if let Some(frames) = self.frames.take() {
@@ -458,7 +471,21 @@ fn spawn_threads(
     let (est_tx, est_rx) = rtrb::RingBuffer::new(ESTIMATE_RING);
     let (gains_tx, gains_rx) = rtrb::RingBuffer::new(4);
     let (events_tx, events_rx) = mpsc::channel();
-    // The monitor first: it only reads, and a port in use stops the start right here.
+    // The stream and the monitor first: they only read, and a socket refused or a port
+    // in use stops the start right here (a stream not yet joined stops as it drops).
+    let (stream, estimate_tap, haptic_tap) = match options.stream.udp {
+        Some(addr) => {
+            let shared = Arc::new(StreamShared::default());
+            let started = stream::start(&options.stream, shared, clock, options.pixel_origin)
+                .with_context(|| format!("starting the data stream to {addr} ([stream] udp)"))?;
+            (
+                Some(started.handle),
+                Some(started.estimates),
+                started.haptic,
+            )
+        }
+        None => (None, None, None),
+    };
     let (snapshots, monitor) = match &options.monitor {
         Some(config) if config.wants_snapshots(options.session_dir.is_some()) => {
             let (tap, reader) = snapshot_channel(config.frame_hz);
@@ -466,6 +493,7 @@ fn spawn_threads(
                 loop_shared: loop_shared.clone(),
                 pipeline_shared: pipeline_shared.clone(),
                 recording: recording.clone(),
+                stream: stream.as_ref().map(|s| s.shared.clone()),
                 inject: options.inject.clone(),
             };
             let handle = monitor::start(config, reader, view, options.session_dir.clone())
@@ -502,6 +530,7 @@ fn spawn_threads(
             estimates: estimates_in,
             telemetry: est_tx,
             snapshots,
+            stream: estimate_tap,
         };
         let estimator = devices.estimator;
         thread::Builder::new()
@@ -520,7 +549,7 @@ fn spawn_threads(
     .context("starting the frames thread")?;
     let outputs_zeroed = Arc::new(AtomicBool::new(false));
     let shared_for_threads = loop_shared.clone();
-    let haptic = HapticLoop::new(
+    let mut haptic_loop = HapticLoop::new(
         gains,
         devices.haptic,
         devices.stage,
@@ -530,9 +559,11 @@ fn spawn_threads(
         ticks_tx,
         loop_shared,
         options.loop_options.clone(),
-    )
-    .spawn()
-    .context("starting the haptic loop thread")?;
+    );
+    haptic_loop.stream = haptic_tap;
+    let haptic = haptic_loop
+        .spawn()
+        .context("starting the haptic loop thread")?;
     Ok(Threads {
         frames: Some(frames),
         tracker: Some(tracker),
@@ -541,6 +572,7 @@ fn spawn_threads(
         events: events_tx,
         gains: gains_tx,
         monitor,
+        stream,
         loop_shared: shared_for_threads,
         pipeline_shared: pipeline_for_threads,
         outputs_zeroed,
@@ -662,6 +694,7 @@ async fn supervise(
     health.finish_status_line(options.status_line);
     let duration_s = started.elapsed().as_secs_f64();
     memory.sample(duration_s);
+    let stream_shared = threads.stream.as_ref().map(|s| s.shared.clone());
     let (loop_report, tracker_report) = threads.shut_down(&exit.describe());
     let outputs_zeroed = threads.outputs_zeroed.load(Ordering::Relaxed);
     let realtime = loop_report.as_ref().is_some_and(|r| r.realtime);
@@ -678,6 +711,7 @@ async fn supervise(
         outputs_zeroed,
     };
     stats.recording = recording_stats(&recording);
+    stats.stream = stream_shared.map(|s| s.stats());
     Ok(Outcome {
         stats,
         exit,
@@ -760,6 +794,13 @@ fn dead_thread(threads: &Threads) -> Option<String> {
     {
         return Some("monitor".into());
     }
+    if threads
+        .stream
+        .as_ref()
+        .is_some_and(StreamHandle::is_finished)
+    {
+        return Some("stream".into());
+    }
     None
 }
 
@@ -814,6 +855,7 @@ fn assemble_stats(
         memory: MemoryStats::default(),
         stop: StopStats::default(),
         recording: RecordingStats::default(),
+        stream: None,
     }
 }
 

@@ -29,6 +29,7 @@ use crate::daemon::haptic_loop::LoopShared;
 use crate::daemon::inject::PanicInjection;
 use crate::daemon::pipeline::PipelineShared;
 use crate::daemon::snapshot::SnapshotReader;
+use crate::daemon::stream::StreamShared;
 use crate::daemon::telemetry::RecordingStatus;
 
 /// How often the page is updated.
@@ -41,6 +42,8 @@ pub struct DaemonView {
     pub pipeline_shared: Arc<PipelineShared>,
     /// Whether the session is being recorded (shown on the page).
     pub recording: Arc<RecordingStatus>,
+    /// The live data stream's counters, when `[stream]` is on.
+    pub stream: Option<Arc<StreamShared>>,
     /// A panic to inject into the monitor thread (tests only).
     pub inject: Option<PanicInjection>,
 }

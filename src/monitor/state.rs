@@ -176,6 +176,7 @@ impl Producer {
                 "frame_period_ms": l.frame_period_us.load(Ordering::Relaxed) as f64 * 1e-3,
                 "slow_frames": l.slow_frames.load(Ordering::Relaxed),
             },
+            "stream": self.view.stream.as_ref().map(|s| s.stats()),
             "frame": self.frame,
             "clients": self.hub.clients(),
             "dropped_updates": self.hub.dropped_updates.load(Ordering::Relaxed),

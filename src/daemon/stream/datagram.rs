@@ -1,0 +1,305 @@
+//! The stream's datagrams: one JSON object each, built into a reused buffer. The field
+//! names and units are an interface (docs/stream.md); a value the daemon does not know
+//! (no detection, no stylus reading) is `null`, never a made-up number.
+use std::fmt;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Serialize, Serializer};
+
+use crate::config::PixelOrigin;
+use crate::daemon::haptic_loop::TickRecord;
+use crate::daemon::PublishedEstimate;
+use crate::hw::Clock;
+
+/// The wall-clock time of the daemon clock's zero, taken once when the stream starts:
+/// every datagram's `utc` is this plus its `t_s`, so the stream stays on one timebase
+/// even if the system clock is stepped during the run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UtcAnchor {
+    /// Seconds since 1970-01-01T00:00:00Z at t_s = 0.
+    pub unix_s_at_zero: f64,
+}
+
+impl UtcAnchor {
+    /// Reads the system clock between two reads of `clock` and takes the midpoint.
+    pub fn take(clock: &Clock) -> UtcAnchor {
+        let before_s = clock.now_s();
+        let wall_s = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        let after_s = clock.now_s();
+        UtcAnchor {
+            unix_s_at_zero: wall_s - 0.5 * (before_s + after_s),
+        }
+    }
+
+    /// Seconds since 1970-01-01T00:00:00Z at `t_s` on the daemon clock.
+    pub fn unix_s(&self, t_s: f64) -> f64 {
+        self.unix_s_at_zero + t_s
+    }
+}
+
+/// A Unix time printed as RFC 3339 UTC with microseconds: `2026-12-03T00:01:10.123456Z`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Utc(pub f64);
+
+impl fmt::Display for Utc {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let micros = (self.0 * 1e6).round() as i64;
+        let secs = micros.div_euclid(1_000_000);
+        let (year, month, day) = civil_from_days(secs.div_euclid(86_400));
+        let rem = secs.rem_euclid(86_400);
+        write!(
+            f,
+            "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:06}Z",
+            rem / 3600,
+            rem / 60 % 60,
+            rem % 60,
+            micros.rem_euclid(1_000_000)
+        )
+    }
+}
+
+impl Serialize for Utc {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        if self.0.is_finite() {
+            serializer.collect_str(self)
+        } else {
+            serializer.serialize_none()
+        }
+    }
+}
+
+/// (year, month, day) of a count of days since 1970-01-01, proleptic Gregorian
+/// (Howard Hinnant's civil_from_days).
+fn civil_from_days(days: i64) -> (i64, i64, i64) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    (yoe + era * 400 + i64::from(month <= 2), month, day)
+}
+
+/// A number, or None (JSON null) when it is not finite.
+fn known(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+#[derive(Serialize)]
+struct EstimateDatagram {
+    kind: &'static str,
+    seq: u64,
+    frame_seq: u64,
+    utc: Utc,
+    unix_s: f64,
+    t_s: f64,
+    detected: bool,
+    angle_deg: Option<f64>,
+    #[serde(rename = "force_nN")]
+    force_nn: Option<f64>,
+    tip_x: Option<f64>,
+    tip_y: Option<f64>,
+    confidence: f64,
+    angle_sigma_deg: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct HapticDatagram {
+    kind: &'static str,
+    seq: u64,
+    utc: Utc,
+    unix_s: f64,
+    t_s: f64,
+    state: &'static str,
+    position_mm: [Option<f64>; 3],
+    #[serde(rename = "stylus_force_N")]
+    stylus_force_n: [Option<f64>; 3],
+    stage_velocity_um_s: [Option<f64>; 3],
+    #[serde(rename = "rendered_force_nN")]
+    rendered_force_nn: Option<f64>,
+    press_blocked: bool,
+}
+
+/// How datagrams are stamped and where their pixels count from.
+#[derive(Debug, Clone, Copy)]
+pub struct Format {
+    pub anchor: UtcAnchor,
+    /// `tracker.pixel_origin`, as in estimates.csv.
+    pub pixel_origin: PixelOrigin,
+}
+
+impl Format {
+    /// Writes the datagram of a published estimate into `out` (cleared first).
+    pub fn estimate(&self, out: &mut Vec<u8>, e: &PublishedEstimate) {
+        let tip = self.pixel_origin.output(e.apex_px).map(known);
+        let unix_s = self.anchor.unix_s(e.frame_time_s);
+        let datagram = EstimateDatagram {
+            kind: "estimate",
+            seq: e.seq,
+            frame_seq: e.frame_sequence,
+            utc: Utc(unix_s),
+            unix_s,
+            t_s: e.frame_time_s,
+            detected: e.detected,
+            angle_deg: known(e.angle_deg),
+            force_nn: known(e.force_nn),
+            tip_x: tip[0],
+            tip_y: tip[1],
+            confidence: e.confidence,
+            angle_sigma_deg: known(e.angle_sigma_deg),
+        };
+        write(out, &datagram);
+    }
+
+    /// Writes the datagram of one haptic tick, the `seq`-th sent, into `out`.
+    pub fn haptic(&self, out: &mut Vec<u8>, seq: u64, r: &TickRecord) {
+        let unix_s = self.anchor.unix_s(r.t_s);
+        let datagram = HapticDatagram {
+            kind: "haptic",
+            seq,
+            utc: Utc(unix_s),
+            unix_s,
+            t_s: r.t_s,
+            state: r.state.as_str(),
+            position_mm: r.position_mm.map(known),
+            stylus_force_n: r.force_n.map(known),
+            stage_velocity_um_s: r.velocity_um_s.map(known),
+            rendered_force_nn: known(r.rendered_force_nn),
+            press_blocked: r.press_blocked,
+        };
+        write(out, &datagram);
+    }
+}
+
+fn write(out: &mut Vec<u8>, datagram: &impl Serialize) {
+    out.clear();
+    // Writing into a Vec cannot fail, and every field serializes.
+    let _ = serde_json::to_writer(&mut *out, datagram);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::SafetyState;
+
+    #[test]
+    fn utc_is_rfc3339_with_microseconds() {
+        let shown = [
+            0.0,
+            951_782_400.0,
+            1_796_256_070.123_456,
+            -0.5,
+            4_102_444_799.999_999_6,
+        ]
+        .map(|s| Utc(s).to_string());
+        assert_eq!(
+            shown,
+            [
+                "1970-01-01T00:00:00.000000Z",
+                "2000-02-29T00:00:00.000000Z",
+                "2026-12-03T00:01:10.123456Z",
+                "1969-12-31T23:59:59.500000Z",
+                "2100-01-01T00:00:00.000000Z",
+            ]
+        );
+    }
+
+    #[test]
+    fn anchor_follows_the_system_clock() {
+        let clock = Clock::start();
+        let anchor = UtcAnchor::take(&clock);
+        let wall_s = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap()
+            .as_secs_f64();
+        assert!((anchor.unix_s(clock.now_s()) - wall_s).abs() < 0.01);
+    }
+
+    fn json(bytes: &[u8]) -> serde_json::Value {
+        serde_json::from_slice(bytes).unwrap()
+    }
+
+    #[test]
+    fn estimate_fields_and_nulls() {
+        let format = Format {
+            anchor: UtcAnchor {
+                unix_s_at_zero: 1_796_256_000.0,
+            },
+            pixel_origin: PixelOrigin::Corner,
+        };
+        let mut out = Vec::new();
+        let e = PublishedEstimate {
+            seq: 7,
+            frame_sequence: 9,
+            frame_time_s: 70.25,
+            published_s: 70.26,
+            detected: true,
+            angle_deg: 1.5,
+            force_nn: 2500.0,
+            apex_px: [100.0, 200.0],
+            confidence: 0.875,
+            angle_sigma_deg: f64::NAN,
+        };
+        format.estimate(&mut out, &e);
+        let v = json(&out);
+        assert_eq!(v["kind"], "estimate");
+        assert_eq!(
+            (v["seq"].as_u64(), v["frame_seq"].as_u64()),
+            (Some(7), Some(9))
+        );
+        assert_eq!(v["utc"], "2026-12-03T00:01:10.250000Z");
+        assert_eq!(v["unix_s"], 1_796_256_070.25);
+        assert_eq!(v["t_s"], 70.25);
+        assert_eq!(v["force_nN"], 2500.0);
+        assert_eq!(
+            (v["tip_x"].as_f64(), v["tip_y"].as_f64()),
+            (Some(100.5), Some(200.5))
+        );
+        assert!(v["angle_sigma_deg"].is_null());
+        // Not detected: what is unknown is null.
+        format.estimate(&mut out, &PublishedEstimate::default());
+        let v = json(&out);
+        assert_eq!(v["detected"], false);
+        for key in ["angle_deg", "force_nN", "tip_x", "tip_y", "angle_sigma_deg"] {
+            assert!(v[key].is_null(), "{key}: {v}");
+        }
+    }
+
+    #[test]
+    fn haptic_fields() {
+        let format = Format {
+            anchor: UtcAnchor {
+                unix_s_at_zero: 0.0,
+            },
+            pixel_origin: PixelOrigin::Centre,
+        };
+        let record = TickRecord {
+            t_s: 1.0,
+            period_us: 1000.0,
+            position_mm: [f64::NAN; 3],
+            force_n: [0.1, 0.0, -0.2],
+            velocity_um_s: [5.0, 0.0, 0.0],
+            rendered_force_nn: 150.0,
+            state: SafetyState::Engaged,
+            press_blocked: true,
+            gate_held: 0,
+            gate_attenuated: 0,
+        };
+        let mut out = Vec::new();
+        format.haptic(&mut out, 3, &record);
+        let v = json(&out);
+        assert_eq!(v["kind"], "haptic");
+        assert_eq!(v["seq"], 3);
+        assert_eq!(v["utc"], "1970-01-01T00:00:01.000000Z");
+        assert_eq!(v["state"], SafetyState::Engaged.as_str());
+        assert!(v["position_mm"][0].is_null());
+        assert_eq!(v["stylus_force_N"][2], -0.2);
+        assert_eq!(v["stage_velocity_um_s"][0], 5.0);
+        assert_eq!(v["rendered_force_nN"], 150.0);
+        assert_eq!(v["press_blocked"], true);
+    }
+}
