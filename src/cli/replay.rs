@@ -1,5 +1,7 @@
 //! `nanoforce replay`: runs the tracker over a recorded session's frames and writes the
-//! results CSV (and, on request, Figure-8 style overlays).
+//! results CSV (and, on request, Figure-8 style overlays). The frames are a folder of
+//! image files, or the `frames.nfrm` of a session `nanoforce run` recorded (tracked with
+//! the configuration the run used, unless `--config` gives another).
 //!
 //! Outputs never overwrite inputs: before anything is written, the CSV and every overlay
 //! path are compared (after resolving symbolic links, `.` and `..`) with the frames, the
@@ -16,11 +18,15 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use image::GrayImage;
+
 use crate::config::Config;
-use crate::daemon::lab::tracker_from_config;
+use crate::daemon::lab::{live_tracker, tracker_from_config};
+use crate::hw::frames::recording::FrameFile;
 use crate::session::frames::{list_frames, load_gray};
+use crate::session::live::{is_live_session, SessionInfo, CONFIG_FILE, SESSION_FILE};
 use crate::session::metadata::{read_sem_metadata, SemMetadata};
-use crate::session::results;
+use crate::session::results::{self, FrameLabel};
 use crate::vision::{draw_overlay, Tracker};
 
 /// Track the tip in a recorded session's frames and write the results CSV.
@@ -28,7 +34,12 @@ use crate::vision::{draw_overlay, Tracker};
 #[command(
     long_about = "Tracks the cantilever tip in every frame of a recorded session and \
 writes one CSV row per frame.\n\n\
-Frames are the PNG, TIFF (8- or 16-bit) and PGM files of FRAMES_DIR, in file-name order. \
+A session folder recorded by `nanoforce run` (it holds session.json and frames.nfrm) is \
+tracked again frame by frame, with the configuration the run used (its config.toml) or, \
+after re-calibrating, the one --config names. Its rows carry the frame's sequence number \
+(frame_seq, as in the session's estimates.csv) and capture time (utc).\n\n\
+Any other folder is a folder of frames: the PNG, TIFF (8- or 16-bit) and PGM files of \
+FRAMES_DIR, in file-name order (frame_seq counts them 1, 2, ...); --config is required. \
 A file that does not decode is reported and gets a row with detected = 0; it does not stop \
 the replay.\n\n\
 CSV columns: frame (file name), detected (1/0), angle_deg (tip rotation from the \
@@ -40,7 +51,8 @@ reference pixel), force_saturated, red/blue/green_support (edge pixels), px_per_
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
-pixels), miss (why not detected) and, with --timing, processing_ms. Without --timing the \
+pixels), miss (why not detected), frame_seq, utc and, with --timing, processing_ms. \
+Without --timing the \
 CSV is identical from run to run.\n\n\
 Overlays (--overlay DIR) are PNG files named after their frame: a PNG frame keeps its \
 name (frame_00001.png), any other frame gets its full name plus .png (frame_00001.tif \
@@ -48,16 +60,19 @@ becomes frame_00001.tif.png), so x.png and x.tif never share an overlay. Outputs
 overwrite inputs: an overlay folder that is the frames folder, or a CSV or overlay path \
 that is a frame, the configuration or its reference image, is refused before anything \
 is written.",
-    after_help = "Example:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
-python3 score.py session/truth.csv out.csv"
+    after_help = "Examples:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
+python3 score.py session/truth.csv out.csv\n  \
+nanoforce replay /var/lib/nanoforce/sessions/20261203T000108Z-4242 --csv again.csv"
 )]
 pub struct ReplayArgs {
-    /// Folder of frames (PNG, TIFF, PGM), replayed in file-name order.
-    #[arg(value_name = "FRAMES_DIR")]
+    /// A session folder recorded by `nanoforce run`, or a folder of frames (PNG, TIFF,
+    /// PGM) replayed in file-name order.
+    #[arg(value_name = "SESSION_OR_FRAMES_DIR")]
     pub frames_dir: PathBuf,
-    /// Probe configuration: [cantilever] and [tracker] with its calibration.
+    /// Probe configuration: [cantilever] and [tracker] with its calibration (default for
+    /// a recorded session: the configuration it ran with).
     #[arg(long, value_name = "FILE")]
-    pub config: PathBuf,
+    pub config: Option<PathBuf>,
     /// Where to write the results.
     #[arg(long, value_name = "FILE")]
     pub csv: PathBuf,
@@ -89,15 +104,27 @@ pub struct ReplaySummary {
 const METADATA_WARNINGS_SHOWN: usize = 5;
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
-    let config = Config::load(&args.config)?;
-    let mut tracker = tracker_from_config(&config)?;
+    let session = is_live_session(&args.frames_dir)
+        .then(|| SessionInfo::read(&args.frames_dir))
+        .transpose()?;
+    let (config, config_path) = load_config(&args, session.as_ref())?;
+    let mut tracker = match session {
+        Some(_) => live_tracker(&config)?,
+        None => tracker_from_config(&config)?,
+    };
     tracker.set_coherence(!args.no_coherence);
-    let reference = config
-        .tracker
-        .calibration
-        .as_ref()
-        .map(|c| c.reference_image.as_path());
-    let summary = replay(&mut tracker, &args, reference)?;
+    let inputs = Inputs {
+        config: &config_path,
+        reference: config
+            .tracker
+            .calibration
+            .as_ref()
+            .map(|c| c.reference_image.as_path()),
+    };
+    let summary = match &session {
+        Some(info) => replay_session(&mut tracker, &args, info, &inputs)?,
+        None => replay(&mut tracker, &args, &inputs)?,
+    };
     eprintln!(
         "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,
@@ -115,70 +142,195 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`;
-/// `reference` is the configuration's reference image (an input the outputs must spare).
+/// The configuration (--config, or the one a recorded session ran with) and its path.
+fn load_config(
+    args: &ReplayArgs,
+    session: Option<&SessionInfo>,
+) -> anyhow::Result<(Config, PathBuf)> {
+    match (&args.config, session) {
+        (Some(path), _) => Ok((Config::load(path)?, path.clone())),
+        (None, Some(info)) => {
+            let path = args.frames_dir.join(CONFIG_FILE);
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            // Relative paths (the reference image) resolve as in the run: next to the
+            // file it loaded.
+            let base = info
+                .config_file
+                .as_ref()
+                .map_or(path.clone(), PathBuf::from);
+            let config = Config::from_toml_str(&text, &base)
+                .with_context(|| format!("the configuration of the session, {}", path.display()))?;
+            Ok((config, path))
+        }
+        (None, None) => anyhow::bail!(
+            "{}: not a session recorded by `nanoforce run` (no {SESSION_FILE}): a folder \
+             of frames needs --config",
+            args.frames_dir.display()
+        ),
+    }
+}
+
+/// The files a replay reads besides the frames, which its outputs must spare.
+pub struct Inputs<'a> {
+    pub config: &'a Path,
+    /// The configuration's reference image.
+    pub reference: Option<&'a Path>,
+}
+
+/// The results CSV, overlays and timing of a replay as it goes.
+struct Output<'a> {
+    args: &'a ReplayArgs,
+    csv: BufWriter<File>,
+    progress: ProgressBar,
+    times_ms: Vec<f64>,
+    summary: ReplaySummary,
+}
+
+impl<'a> Output<'a> {
+    fn create(args: &'a ReplayArgs, frames: Option<usize>) -> anyhow::Result<Output<'a>> {
+        if let Some(dir) = &args.overlay {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        let file =
+            File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
+        let mut csv = BufWriter::new(file);
+        writeln!(csv, "{}", results::header(args.timing))?;
+        Ok(Output {
+            args,
+            csv,
+            progress: progress_bar(frames),
+            times_ms: Vec::with_capacity(frames.unwrap_or(0)),
+            summary: ReplaySummary {
+                frames: 0,
+                detected: 0,
+                unreadable: 0,
+                with_scale: 0,
+                metadata_warnings: 0,
+                median_ms: None,
+            },
+        })
+    }
+
+    /// Tracks one frame and writes its row (and overlay, named `overlay_name`).
+    fn track(
+        &mut self,
+        tracker: &mut Tracker,
+        image: &GrayImage,
+        label: &FrameLabel,
+        sem: &SemMetadata,
+        overlay_name: &str,
+    ) -> anyhow::Result<()> {
+        let started = Instant::now();
+        let estimate = tracker.track(image);
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        self.times_ms.push(ms);
+        self.summary.frames += 1;
+        self.summary.detected += usize::from(estimate.detected);
+        let ms_column = self.args.timing.then_some(ms);
+        let written = estimate.with_pixel_origin(tracker.pixel_origin());
+        results::write_row(&mut self.csv, label, &written, sem, ms_column)?;
+        if let Some(dir) = &self.args.overlay {
+            let out = dir.join(overlay_name);
+            draw_overlay(image, &estimate)
+                .save(&out)
+                .with_context(|| format!("writing {}", out.display()))?;
+        }
+        self.progress.inc(1);
+        Ok(())
+    }
+
+    fn finish(mut self) -> anyhow::Result<ReplaySummary> {
+        self.progress.finish_and_clear();
+        self.csv
+            .flush()
+            .with_context(|| format!("writing {}", self.args.csv.display()))?;
+        self.times_ms.sort_by(f64::total_cmp);
+        self.summary.median_ms = self.times_ms.get(self.times_ms.len() / 2).copied();
+        Ok(self.summary)
+    }
+}
+
+/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`.
 pub fn replay(
     tracker: &mut Tracker,
     args: &ReplayArgs,
-    reference: Option<&Path>,
+    inputs: &Inputs,
 ) -> anyhow::Result<ReplaySummary> {
     let frames = list_frames(&args.frames_dir)?;
-    let overlay_names = check_outputs(args, &frames, reference)?;
-    if let Some(dir) = &args.overlay {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let file =
-        File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
-    let mut csv = BufWriter::new(file);
-    writeln!(csv, "{}", results::header(args.timing))?;
-    let progress = progress_bar(frames.len());
-    let mut times_ms = Vec::with_capacity(frames.len());
-    let mut summary = ReplaySummary {
-        frames: frames.len(),
-        detected: 0,
-        unreadable: 0,
-        with_scale: 0,
-        metadata_warnings: 0,
-        median_ms: None,
-    };
-    for (path, overlay_name) in frames.iter().zip(&overlay_names) {
+    let overlay_names = check_outputs(args, &frames, inputs)?;
+    let mut out = Output::create(args, Some(frames.len()))?;
+    for (index, (path, overlay_name)) in frames.iter().zip(&overlay_names).enumerate() {
         let name = path
             .file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().to_string());
-        let sem = frame_metadata(path, &mut summary, &progress);
+        let label = FrameLabel {
+            name: &name,
+            seq: index as u64 + 1,
+            utc: "",
+        };
+        let sem = frame_metadata(path, &mut out.summary, &out.progress);
         match load_gray(path) {
-            Ok(image) => {
-                let started = Instant::now();
-                let estimate = tracker.track(&image);
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                times_ms.push(ms);
-                summary.detected += usize::from(estimate.detected);
-                let ms_column = args.timing.then_some(ms);
-                let written = estimate.with_pixel_origin(tracker.pixel_origin());
-                results::write_row(&mut csv, &name, &written, &sem, ms_column)?;
-                if let Some(dir) = &args.overlay {
-                    let out = dir.join(overlay_name);
-                    draw_overlay(&image, &estimate)
-                        .save(&out)
-                        .with_context(|| format!("writing {}", out.display()))?;
-                }
-            }
+            Ok(image) => out.track(tracker, &image, &label, &sem, overlay_name)?,
             Err(e) => {
-                progress.suspend(|| tracing::warn!("{e}; recorded as not detected"));
-                summary.unreadable += 1;
+                out.progress
+                    .suspend(|| tracing::warn!("{e}; recorded as not detected"));
+                out.summary.frames += 1;
+                out.summary.unreadable += 1;
                 // Coherence must not carry over a gap in the sequence.
                 tracker.reset();
-                results::write_unreadable(&mut csv, &name, args.timing)?;
+                results::write_unreadable(&mut out.csv, &label, args.timing)?;
+                out.progress.inc(1);
             }
         }
-        progress.inc(1);
     }
-    progress.finish_and_clear();
-    csv.flush()
-        .with_context(|| format!("writing {}", args.csv.display()))?;
-    times_ms.sort_by(f64::total_cmp);
-    summary.median_ms = times_ms.get(times_ms.len() / 2).copied();
-    Ok(summary)
+    out.finish()
+}
+
+/// Replays a session recorded by `nanoforce run` (its `frames.nfrm`, in recorded order)
+/// through `tracker` into `args.csv`. Frames the recording dropped leave a gap in
+/// `frame_seq`; the tracker goes on across it, as the live tracker did across the frames
+/// it never saw.
+pub fn replay_session(
+    tracker: &mut Tracker,
+    args: &ReplayArgs,
+    info: &SessionInfo,
+    inputs: &Inputs,
+) -> anyhow::Result<ReplaySummary> {
+    let session_json = args.frames_dir.join(SESSION_FILE);
+    let Some(frames_path) = info.frames_path(&args.frames_dir) else {
+        anyhow::bail!(
+            "{}: this session recorded no frames (no frames_file)",
+            session_json.display()
+        );
+    };
+    check_outputs(args, &[frames_path.clone(), session_json], inputs)?;
+    let mut frames = FrameFile::open(&frames_path)?;
+    let mut out = Output::create(args, None)?;
+    let mut image = GrayImage::new(0, 0);
+    let sem = SemMetadata::default();
+    while let Some(header) = frames.next_into(&mut image)? {
+        let utc = match header.capture_ns {
+            0 => String::new(),
+            ns => info.anchor.utc(info.anchor.seconds_at(ns)),
+        };
+        let name = header.sequence.to_string();
+        let label = FrameLabel {
+            name: &name,
+            seq: header.sequence,
+            utc: &utc,
+        };
+        let overlay_name = format!("frame_{:08}.png", header.sequence);
+        out.track(tracker, &image, &label, &sem, &overlay_name)?;
+    }
+    if frames.skipped_bytes > 0 {
+        tracing::warn!(
+            "{}: skipped {} bytes that were not a frame",
+            frames_path.display(),
+            frames.skipped_bytes
+        );
+    }
+    out.finish()
 }
 
 /// The SEM metadata of one frame; problems are warned about (the first few in full) and
@@ -212,19 +364,20 @@ pub fn overlay_name(frame: &Path) -> String {
     }
 }
 
-/// Refuses outputs that would overwrite an input; returns each frame's overlay name.
+/// Refuses outputs that would overwrite an input (`frames`: the frame files, or a
+/// session's frames file and description); returns each frame's overlay name.
 fn check_outputs(
     args: &ReplayArgs,
     frames: &[PathBuf],
-    reference: Option<&Path>,
+    files: &Inputs,
 ) -> anyhow::Result<Vec<String>> {
     let mut inputs: HashMap<PathBuf, String> = HashMap::new();
     for frame in frames {
         inputs.insert(resolved(frame), format!("the frame {}", frame.display()));
     }
-    let config = format!("the configuration {}", args.config.display());
-    inputs.insert(resolved(&args.config), config);
-    if let Some(reference) = reference {
+    let config = format!("the configuration {}", files.config.display());
+    inputs.insert(resolved(files.config), config);
+    if let Some(reference) = files.reference {
         let what = format!("the reference image {}", reference.display());
         inputs.insert(resolved(reference), what);
     }
@@ -295,14 +448,19 @@ pub(crate) fn resolved(path: &Path) -> PathBuf {
     out
 }
 
-fn progress_bar(len: usize) -> ProgressBar {
+/// A progress bar on a terminal; `len`: the number of frames, when known.
+fn progress_bar(len: Option<usize>) -> ProgressBar {
     if !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
-    let bar = ProgressBar::new(len as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{bar:40} {pos}/{len} frames  {elapsed} (eta {eta})")
-    {
+    let (bar, template) = match len {
+        Some(n) => (
+            ProgressBar::new(n as u64),
+            "{bar:40} {pos}/{len} frames  {elapsed} (eta {eta})",
+        ),
+        None => (ProgressBar::no_length(), "{pos} frames  {elapsed}"),
+    };
+    if let Ok(style) = ProgressStyle::with_template(template) {
         bar.set_style(style);
     }
     bar

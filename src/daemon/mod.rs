@@ -20,6 +20,7 @@
 //! tracker pass or a 1 kHz deadline must never wait on an executor, and async is only
 //! the wiring around them.
 pub mod config;
+pub mod frame_record;
 pub mod haptic_loop;
 pub mod inject;
 pub mod instance;
