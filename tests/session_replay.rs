@@ -83,10 +83,17 @@ fn a_recorded_live_run_replays_to_the_same_estimates() {
     assert_eq!(frames_bytes, recorded * (32 + 640 * 480));
 
     let replayed_csv = state.path().join("replayed.csv");
-    let err = replay(&session, &replayed_csv, &[]);
+    let err = replay(&session, &replayed_csv, &["--threads", "1"]);
     assert!(
         err.contains(&format!("replayed {recorded} frames")),
         "{err}"
+    );
+    // On two threads (two chunks of frames at once) the CSV is byte-identical.
+    let two_threads = state.path().join("two-threads.csv");
+    replay(&session, &two_threads, &["--threads", "2"]);
+    assert_eq!(
+        std::fs::read(&replayed_csv).unwrap(),
+        std::fs::read(&two_threads).unwrap()
     );
 
     let live = read_rows(&session.join("estimates.csv"));
@@ -94,7 +101,7 @@ fn a_recorded_live_run_replays_to_the_same_estimates() {
         .into_iter()
         .map(|r| (r["frame_seq"].clone(), r))
         .collect();
-    assert!(live.len() > 250, "{} published estimates", live.len());
+    assert!(live.len() > 120, "{} published estimates", live.len());
     let mut same = 0;
     let mut detected = 0;
     let mut differences = Vec::new();

@@ -12,22 +12,19 @@ use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Component, Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use image::GrayImage;
-
+use super::replay_pool::{replay_frames, Frames, Job};
 use crate::config::Config;
 use crate::daemon::lab::{live_tracker, tracker_from_config};
 use crate::hw::frames::recording::FrameFile;
-use crate::session::frames::{list_frames, load_gray};
+use crate::session::frames::list_frames;
 use crate::session::live::{is_live_session, SessionInfo, CONFIG_FILE, SESSION_FILE};
-use crate::session::metadata::{read_sem_metadata, SemMetadata};
-use crate::session::results::{self, FrameLabel};
-use crate::vision::{draw_overlay, Tracker};
+use crate::session::results;
+use crate::vision::Tracker;
 
 /// Track the tip in a recorded session's frames and write the results CSV.
 #[derive(Debug, Args)]
@@ -85,6 +82,10 @@ pub struct ReplayArgs {
     /// Add a processing_ms column (makes the CSV differ between runs).
     #[arg(long)]
     pub timing: bool,
+    /// Threads that track (default: every core this process may use). The CSV is the
+    /// same for any number.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
+    pub threads: Option<u16>,
 }
 
 /// What a replay did.
@@ -100,19 +101,17 @@ pub struct ReplaySummary {
     pub median_ms: Option<f64>,
 }
 
-/// Metadata warnings printed in full; later ones are only counted.
-const METADATA_WARNINGS_SHOWN: usize = 5;
-
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let session = is_live_session(&args.frames_dir)
         .then(|| SessionInfo::read(&args.frames_dir))
         .transpose()?;
     let (config, config_path) = load_config(&args, session.as_ref())?;
-    let mut tracker = match session {
-        Some(_) => live_tracker(&config)?,
-        None => tracker_from_config(&config)?,
+    // One tracker now, so a bad calibration is reported before anything is written.
+    let tracker = || match session {
+        Some(_) => live_tracker(&config),
+        None => tracker_from_config(&config),
     };
-    tracker.set_coherence(!args.no_coherence);
+    tracker()?;
     let inputs = Inputs {
         config: &config_path,
         reference: config
@@ -122,8 +121,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             .map(|c| c.reference_image.as_path()),
     };
     let summary = match &session {
-        Some(info) => replay_session(&mut tracker, &args, info, &inputs)?,
-        None => replay(&mut tracker, &args, &inputs)?,
+        Some(info) => replay_session(&args, info, &inputs, &tracker)?,
+        None => replay(&args, &inputs, &tracker)?,
     };
     eprintln!(
         "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
@@ -178,174 +177,98 @@ pub struct Inputs<'a> {
     pub reference: Option<&'a Path>,
 }
 
-/// The results CSV, overlays and timing of a replay as it goes.
-struct Output<'a> {
-    args: &'a ReplayArgs,
-    csv: BufWriter<File>,
-    progress: ProgressBar,
-    times_ms: Vec<f64>,
-    summary: ReplaySummary,
+/// Writes the results CSV of `frames` (overlays named `overlay_names`), tracking on
+/// `args.threads` threads with trackers from `tracker`.
+fn write_results(
+    args: &ReplayArgs,
+    frames: &Frames,
+    overlay_names: &[String],
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+) -> anyhow::Result<ReplaySummary> {
+    if let Some(dir) = &args.overlay {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let file =
+        File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
+    let mut csv = BufWriter::new(file);
+    writeln!(csv, "{}", results::header(args.timing))?;
+    let progress = progress_bar(frames.count());
+    let job = Job {
+        frames,
+        overlay_names,
+        overlay: args.overlay.as_deref(),
+        timing: args.timing,
+        coherence: !args.no_coherence,
+    };
+    let threads = args.threads.map_or_else(default_threads, usize::from);
+    let done = |n: usize| progress.inc(n as u64);
+    let mut counts = replay_frames(&job, threads, tracker, &mut csv, &done)?;
+    progress.finish_and_clear();
+    csv.flush()
+        .with_context(|| format!("writing {}", args.csv.display()))?;
+    counts.times_ms.sort_by(f64::total_cmp);
+    Ok(ReplaySummary {
+        frames: counts.frames,
+        detected: counts.detected,
+        unreadable: counts.unreadable,
+        with_scale: counts.with_scale,
+        metadata_warnings: counts.metadata_warnings,
+        median_ms: counts.times_ms.get(counts.times_ms.len() / 2).copied(),
+    })
 }
 
-impl<'a> Output<'a> {
-    fn create(args: &'a ReplayArgs, frames: Option<usize>) -> anyhow::Result<Output<'a>> {
-        if let Some(dir) = &args.overlay {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
-        let file =
-            File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
-        let mut csv = BufWriter::new(file);
-        writeln!(csv, "{}", results::header(args.timing))?;
-        Ok(Output {
-            args,
-            csv,
-            progress: progress_bar(frames),
-            times_ms: Vec::with_capacity(frames.unwrap_or(0)),
-            summary: ReplaySummary {
-                frames: 0,
-                detected: 0,
-                unreadable: 0,
-                with_scale: 0,
-                metadata_warnings: 0,
-                median_ms: None,
-            },
-        })
-    }
-
-    /// Tracks one frame and writes its row (and overlay, named `overlay_name`).
-    fn track(
-        &mut self,
-        tracker: &mut Tracker,
-        image: &GrayImage,
-        label: &FrameLabel,
-        sem: &SemMetadata,
-        overlay_name: &str,
-    ) -> anyhow::Result<()> {
-        let started = Instant::now();
-        let estimate = tracker.track(image);
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        self.times_ms.push(ms);
-        self.summary.frames += 1;
-        self.summary.detected += usize::from(estimate.detected);
-        let ms_column = self.args.timing.then_some(ms);
-        let written = estimate.with_pixel_origin(tracker.pixel_origin());
-        results::write_row(&mut self.csv, label, &written, sem, ms_column)?;
-        if let Some(dir) = &self.args.overlay {
-            let out = dir.join(overlay_name);
-            draw_overlay(image, &estimate)
-                .save(&out)
-                .with_context(|| format!("writing {}", out.display()))?;
-        }
-        self.progress.inc(1);
-        Ok(())
-    }
-
-    fn finish(mut self) -> anyhow::Result<ReplaySummary> {
-        self.progress.finish_and_clear();
-        self.csv
-            .flush()
-            .with_context(|| format!("writing {}", self.args.csv.display()))?;
-        self.times_ms.sort_by(f64::total_cmp);
-        self.summary.median_ms = self.times_ms.get(self.times_ms.len() / 2).copied();
-        Ok(self.summary)
-    }
+/// The cores this process may use.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
-/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`.
+/// Replays the frames of `args.frames_dir` into `args.csv`.
 pub fn replay(
-    tracker: &mut Tracker,
     args: &ReplayArgs,
     inputs: &Inputs,
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
     let frames = list_frames(&args.frames_dir)?;
     let overlay_names = check_outputs(args, &frames, inputs)?;
-    let mut out = Output::create(args, Some(frames.len()))?;
-    for (index, (path, overlay_name)) in frames.iter().zip(&overlay_names).enumerate() {
-        let name = path
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().to_string());
-        let label = FrameLabel {
-            name: &name,
-            seq: index as u64 + 1,
-            utc: "",
-        };
-        let sem = frame_metadata(path, &mut out.summary, &out.progress);
-        match load_gray(path) {
-            Ok(image) => out.track(tracker, &image, &label, &sem, overlay_name)?,
-            Err(e) => {
-                out.progress
-                    .suspend(|| tracing::warn!("{e}; recorded as not detected"));
-                out.summary.frames += 1;
-                out.summary.unreadable += 1;
-                // Coherence must not carry over a gap in the sequence.
-                tracker.reset();
-                results::write_unreadable(&mut out.csv, &label, args.timing)?;
-                out.progress.inc(1);
-            }
-        }
-    }
-    out.finish()
+    write_results(args, &Frames::Files(frames), &overlay_names, tracker)
 }
 
 /// Replays a session recorded by `nanoforce run` (its `frames.nfrm`, in recorded order)
-/// through `tracker` into `args.csv`. Frames the recording dropped leave a gap in
-/// `frame_seq`; the tracker goes on across it, as the live tracker did across the frames
-/// it never saw.
+/// into `args.csv`. Frames the recording dropped leave a gap in `frame_seq`; the tracker
+/// goes on across it, as the live tracker did across the frames it never saw.
 pub fn replay_session(
-    tracker: &mut Tracker,
     args: &ReplayArgs,
     info: &SessionInfo,
     inputs: &Inputs,
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
     let session_json = args.frames_dir.join(SESSION_FILE);
-    let Some(frames_path) = info.frames_path(&args.frames_dir) else {
+    let Some(path) = info.frames_path(&args.frames_dir) else {
         anyhow::bail!(
             "{}: this session recorded no frames (no frames_file)",
             session_json.display()
         );
     };
-    check_outputs(args, &[frames_path.clone(), session_json], inputs)?;
-    let mut frames = FrameFile::open(&frames_path)?;
-    let mut out = Output::create(args, None)?;
-    let mut image = GrayImage::new(0, 0);
-    let sem = SemMetadata::default();
-    while let Some(header) = frames.next_into(&mut image)? {
-        let utc = match header.capture_ns {
-            0 => String::new(),
-            ns => info.anchor.utc(info.anchor.seconds_at(ns)),
-        };
-        let name = header.sequence.to_string();
-        let label = FrameLabel {
-            name: &name,
-            seq: header.sequence,
-            utc: &utc,
-        };
-        let overlay_name = format!("frame_{:08}.png", header.sequence);
-        out.track(tracker, &image, &label, &sem, &overlay_name)?;
-    }
-    if frames.skipped_bytes > 0 {
+    check_outputs(args, &[path.clone(), session_json], inputs)?;
+    let index = FrameFile::open(&path)?.index()?;
+    if index.skipped_bytes > 0 {
         tracing::warn!(
             "{}: skipped {} bytes that were not a frame",
-            frames_path.display(),
-            frames.skipped_bytes
+            path.display(),
+            index.skipped_bytes
         );
     }
-    out.finish()
-}
-
-/// The SEM metadata of one frame; problems are warned about (the first few in full) and
-/// counted.
-fn frame_metadata(path: &Path, summary: &mut ReplaySummary, progress: &ProgressBar) -> SemMetadata {
-    let sem = read_sem_metadata(path);
-    summary.with_scale += usize::from(sem.pixel_size_um.is_some());
-    if !sem.warnings.is_empty() {
-        summary.metadata_warnings += 1;
-        if summary.metadata_warnings <= METADATA_WARNINGS_SHOWN {
-            let text = sem.warnings.join("; ");
-            progress.suspend(|| tracing::warn!("{}: SEM metadata: {text}", path.display()));
-        }
-    }
-    sem
+    let overlay_names: Vec<String> = index
+        .frames
+        .iter()
+        .map(|(h, _)| format!("frame_{:08}.png", h.sequence))
+        .collect();
+    let frames = Frames::Recorded {
+        path,
+        frames: index.frames,
+        anchor: info.anchor,
+    };
+    write_results(args, &frames, &overlay_names, tracker)
 }
 
 /// The overlay file name of `frame`: a PNG frame keeps its name (`x.png`), any other
@@ -448,19 +371,15 @@ pub(crate) fn resolved(path: &Path) -> PathBuf {
     out
 }
 
-/// A progress bar on a terminal; `len`: the number of frames, when known.
-fn progress_bar(len: Option<usize>) -> ProgressBar {
+/// A progress bar on a terminal.
+fn progress_bar(len: usize) -> ProgressBar {
     if !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
-    let (bar, template) = match len {
-        Some(n) => (
-            ProgressBar::new(n as u64),
-            "{bar:40} {pos}/{len} frames  {elapsed} (eta {eta})",
-        ),
-        None => (ProgressBar::no_length(), "{pos} frames  {elapsed}"),
-    };
-    if let Ok(style) = ProgressStyle::with_template(template) {
+    let bar = ProgressBar::new(len as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{bar:40} {pos}/{len} frames  {elapsed} (eta {eta})")
+    {
         bar.set_style(style);
     }
     bar

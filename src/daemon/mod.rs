@@ -5,6 +5,8 @@
 //! - `tracker`: the vision tracker turns the newest frame into a published estimate;
 //! - `haptic-loop`: the 1 kHz loop (stylus -> law -> force and S100 rate command);
 //! - `telemetry`: drains the loops' records into the session folder;
+//! - `frame-recorder`: writes the frames the tracker saw into the session's
+//!   `frames.nfrm` ([`frame_record`]);
 //! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
 //!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
 //! - the supervisor, on a small tokio runtime: signals (SIGHUP reloads the gains;

@@ -4,6 +4,7 @@
 //! warning. Bytes that are not a header are skipped to the next one, as the pipe does.
 use std::fs::File;
 use std::io::{BufReader, ErrorKind, Read};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use image::GrayImage;
@@ -27,6 +28,16 @@ pub struct FrameFile {
     pub skipped_bytes: u64,
     /// Whether the last frame was cut short (the file ended inside it).
     pub truncated: bool,
+    /// Bytes read so far.
+    offset: u64,
+}
+
+/// The frames of a file: each one's header and the offset of its pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameIndex {
+    pub frames: Vec<(FrameHeader, u64)>,
+    pub skipped_bytes: u64,
+    pub truncated: bool,
 }
 
 impl FrameFile {
@@ -40,6 +51,7 @@ impl FrameFile {
             reader: BufReader::with_capacity(1 << 20, file),
             skipped_bytes: 0,
             truncated: false,
+            offset: 0,
         })
     }
 
@@ -53,6 +65,63 @@ impl FrameFile {
         &mut self,
         frame: &mut GrayImage,
     ) -> Result<Option<FrameHeader>, FrameFileError> {
+        let Some(h) = self.next_header()? else {
+            return Ok(None);
+        };
+        if frame.dimensions() != (h.width, h.height) {
+            *frame = GrayImage::new(h.width, h.height);
+        }
+        let size = frame.as_raw().len();
+        if self.fill(frame)? < size {
+            return Ok(self.cut_short());
+        }
+        Ok(Some(h))
+    }
+
+    /// Every frame's header and where its pixels start, without reading the pixels.
+    pub fn index(mut self) -> Result<FrameIndex, FrameFileError> {
+        let len = self
+            .reader
+            .get_ref()
+            .metadata()
+            .map_err(|source| self.io_error(source))?
+            .len();
+        let mut frames = Vec::new();
+        while let Some(h) = self.next_header()? {
+            let size = u64::from(h.width) * u64::from(h.height);
+            if self.offset + size > len {
+                self.cut_short();
+                break;
+            }
+            frames.push((h, self.offset));
+            self.reader
+                .seek_relative(size as i64)
+                .map_err(|source| self.io_error(source))?;
+            self.offset += size;
+        }
+        Ok(FrameIndex {
+            frames,
+            skipped_bytes: self.skipped_bytes,
+            truncated: self.truncated,
+        })
+    }
+
+    /// Reads the pixels of the frame `header` describes, at `offset` of `file` (from
+    /// [`FrameFile::index`]), into `frame`.
+    pub fn read_at(
+        file: &File,
+        header: &FrameHeader,
+        offset: u64,
+        frame: &mut GrayImage,
+    ) -> std::io::Result<()> {
+        if frame.dimensions() != (header.width, header.height) {
+            *frame = GrayImage::new(header.width, header.height);
+        }
+        file.read_exact_at(frame, offset)
+    }
+
+    /// Reads the next valid header (skipping bytes that are not one); None at the end.
+    fn next_header(&mut self) -> Result<Option<FrameHeader>, FrameFileError> {
         let mut header = [0u8; HEADER_LEN];
         match self.fill(&mut header)? {
             0 => return Ok(None),
@@ -77,14 +146,14 @@ impl FrameFile {
                 return Ok(self.cut_short());
             }
         }
-        if frame.dimensions() != (h.width, h.height) {
-            *frame = GrayImage::new(h.width, h.height);
-        }
-        let size = frame.as_raw().len();
-        if self.fill(frame)? < size {
-            return Ok(self.cut_short());
-        }
         Ok(Some(h))
+    }
+
+    fn io_error(&self, source: std::io::Error) -> FrameFileError {
+        FrameFileError::Io {
+            path: self.path.clone(),
+            source,
+        }
     }
 
     /// The file ended inside a frame.
@@ -103,7 +172,10 @@ impl FrameFile {
         while done < buf.len() {
             match self.reader.read(&mut buf[done..]) {
                 Ok(0) => break,
-                Ok(n) => done += n,
+                Ok(n) => {
+                    done += n;
+                    self.offset += n as u64;
+                }
                 Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(source) => {
                     return Err(FrameFileError::Io {
@@ -160,6 +232,16 @@ mod tests {
         assert_eq!(file.next_into(&mut image).unwrap(), None);
         assert_eq!(file.skipped_bytes, 4);
         assert!(file.truncated);
+        // The index finds the same frames; their pixels read back from the offsets.
+        let index = FrameFile::open(&path).unwrap().index().unwrap();
+        assert_eq!(index.frames.len(), 3);
+        assert_eq!((index.skipped_bytes, index.truncated), (4, true));
+        let raw = std::fs::File::open(&path).unwrap();
+        for ((h, p), (indexed, offset)) in frames.iter().zip(&index.frames) {
+            assert_eq!(h, indexed);
+            FrameFile::read_at(&raw, indexed, *offset, &mut image).unwrap();
+            assert_eq!(image.as_raw(), p);
+        }
         let missing = FrameFile::open(&dir.path().join("none.nfrm"))
             .err()
             .unwrap()
