@@ -9,6 +9,7 @@ pub mod logging;
 mod model;
 pub mod probe_devices;
 pub mod replay;
+mod replay_pool;
 pub mod report;
 pub mod run;
 pub mod score;

@@ -1,5 +1,7 @@
 //! `nanoforce replay`: runs the tracker over a recorded session's frames and writes the
-//! results CSV (and, on request, Figure-8 style overlays).
+//! results CSV (and, on request, Figure-8 style overlays). The frames are a folder of
+//! image files, or the `frames.nfrm` of a session `nanoforce run` recorded (tracked with
+//! the configuration the run used, unless `--config` gives another).
 //!
 //! Outputs never overwrite inputs: before anything is written, the CSV and every overlay
 //! path are compared (after resolving symbolic links, `.` and `..`) with the frames, the
@@ -10,25 +12,31 @@ use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Component, Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use super::replay_pool::{replay_frames, Frames, Job};
 use crate::config::Config;
-use crate::daemon::lab::tracker_from_config;
-use crate::session::frames::{list_frames, load_gray};
-use crate::session::metadata::{read_sem_metadata, SemMetadata};
+use crate::daemon::lab::{live_tracker, tracker_from_config};
+use crate::hw::frames::recording::FrameFile;
+use crate::session::frames::list_frames;
+use crate::session::live::{is_live_session, SessionInfo, CONFIG_FILE, SESSION_FILE};
 use crate::session::results;
-use crate::vision::{draw_overlay, Tracker};
+use crate::vision::Tracker;
 
 /// Track the tip in a recorded session's frames and write the results CSV.
 #[derive(Debug, Args)]
 #[command(
     long_about = "Tracks the cantilever tip in every frame of a recorded session and \
 writes one CSV row per frame.\n\n\
-Frames are the PNG, TIFF (8- or 16-bit) and PGM files of FRAMES_DIR, in file-name order. \
+A session folder recorded by `nanoforce run` (it holds session.json and frames.nfrm) is \
+tracked again frame by frame, with the configuration the run used (its config.toml) or, \
+after re-calibrating, the one --config names. Its rows carry the frame's sequence number \
+(frame_seq, as in the session's estimates.csv) and capture time (utc).\n\n\
+Any other folder is a folder of frames: the PNG, TIFF (8- or 16-bit) and PGM files of \
+FRAMES_DIR, in file-name order (frame_seq counts them 1, 2, ...); --config is required. \
 A file that does not decode is reported and gets a row with detected = 0; it does not stop \
 the replay.\n\n\
 CSV columns: frame (file name), detected (1/0), angle_deg (tip rotation from the \
@@ -40,7 +48,8 @@ reference pixel), force_saturated, red/blue/green_support (edge pixels), px_per_
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
-pixels), miss (why not detected) and, with --timing, processing_ms. Without --timing the \
+pixels), miss (why not detected), frame_seq, utc and, with --timing, processing_ms. \
+Without --timing the \
 CSV is identical from run to run.\n\n\
 Overlays (--overlay DIR) are PNG files named after their frame: a PNG frame keeps its \
 name (frame_00001.png), any other frame gets its full name plus .png (frame_00001.tif \
@@ -48,16 +57,19 @@ becomes frame_00001.tif.png), so x.png and x.tif never share an overlay. Outputs
 overwrite inputs: an overlay folder that is the frames folder, or a CSV or overlay path \
 that is a frame, the configuration or its reference image, is refused before anything \
 is written.",
-    after_help = "Example:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
-nanoforce score session/truth.csv out.csv"
+    after_help = "Examples:\n  nanoforce replay session/frames --config session/probe.toml --csv out.csv --overlay overlays/\n  \
+nanoforce score session/truth.csv out.csv\n  \
+nanoforce replay /var/lib/nanoforce/sessions/20261203T000108Z-4242 --csv again.csv"
 )]
 pub struct ReplayArgs {
-    /// Folder of frames (PNG, TIFF, PGM), replayed in file-name order.
-    #[arg(value_name = "FRAMES_DIR")]
+    /// A session folder recorded by `nanoforce run`, or a folder of frames (PNG, TIFF,
+    /// PGM) replayed in file-name order.
+    #[arg(value_name = "SESSION_OR_FRAMES_DIR")]
     pub frames_dir: PathBuf,
-    /// Probe configuration: [cantilever] and [tracker] with its calibration.
+    /// Probe configuration: [cantilever] and [tracker] with its calibration (default for
+    /// a recorded session: the configuration it ran with).
     #[arg(long, value_name = "FILE")]
-    pub config: PathBuf,
+    pub config: Option<PathBuf>,
     /// Where to write the results.
     #[arg(long, value_name = "FILE")]
     pub csv: PathBuf,
@@ -70,6 +82,10 @@ pub struct ReplayArgs {
     /// Add a processing_ms column (makes the CSV differ between runs).
     #[arg(long)]
     pub timing: bool,
+    /// Threads that track (default: every core this process may use). The CSV is the
+    /// same for any number.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
+    pub threads: Option<u16>,
 }
 
 /// What a replay did.
@@ -85,19 +101,29 @@ pub struct ReplaySummary {
     pub median_ms: Option<f64>,
 }
 
-/// Metadata warnings printed in full; later ones are only counted.
-const METADATA_WARNINGS_SHOWN: usize = 5;
-
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
-    let config = Config::load(&args.config)?;
-    let mut tracker = tracker_from_config(&config)?;
-    tracker.set_coherence(!args.no_coherence);
-    let reference = config
-        .tracker
-        .calibration
-        .as_ref()
-        .map(|c| c.reference_image.as_path());
-    let summary = replay(&mut tracker, &args, reference)?;
+    let session = is_live_session(&args.frames_dir)
+        .then(|| SessionInfo::read(&args.frames_dir))
+        .transpose()?;
+    let (config, config_path) = load_config(&args, session.as_ref())?;
+    // One tracker now, so a bad calibration is reported before anything is written.
+    let tracker = || match session {
+        Some(_) => live_tracker(&config),
+        None => tracker_from_config(&config),
+    };
+    tracker()?;
+    let inputs = Inputs {
+        config: &config_path,
+        reference: config
+            .tracker
+            .calibration
+            .as_ref()
+            .map(|c| c.reference_image.as_path()),
+    };
+    let summary = match &session {
+        Some(info) => replay_session(&args, info, &inputs, &tracker)?,
+        None => replay(&args, &inputs, &tracker)?,
+    };
     eprintln!(
         "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,
@@ -115,15 +141,50 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Replays the frames of `args.frames_dir` through `tracker` into `args.csv`;
-/// `reference` is the configuration's reference image (an input the outputs must spare).
-pub fn replay(
-    tracker: &mut Tracker,
+/// The configuration (--config, or the one a recorded session ran with) and its path.
+fn load_config(
     args: &ReplayArgs,
-    reference: Option<&Path>,
+    session: Option<&SessionInfo>,
+) -> anyhow::Result<(Config, PathBuf)> {
+    match (&args.config, session) {
+        (Some(path), _) => Ok((Config::load(path)?, path.clone())),
+        (None, Some(info)) => {
+            let path = args.frames_dir.join(CONFIG_FILE);
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            // Relative paths (the reference image) resolve as in the run: next to the
+            // file it loaded.
+            let base = info
+                .config_file
+                .as_ref()
+                .map_or(path.clone(), PathBuf::from);
+            let config = Config::from_toml_str(&text, &base)
+                .with_context(|| format!("the configuration of the session, {}", path.display()))?;
+            Ok((config, path))
+        }
+        (None, None) => anyhow::bail!(
+            "{}: not a session recorded by `nanoforce run` (no {SESSION_FILE}): a folder \
+             of frames needs --config",
+            args.frames_dir.display()
+        ),
+    }
+}
+
+/// The files a replay reads besides the frames, which its outputs must spare.
+pub struct Inputs<'a> {
+    pub config: &'a Path,
+    /// The configuration's reference image.
+    pub reference: Option<&'a Path>,
+}
+
+/// Writes the results CSV of `frames` (overlays named `overlay_names`), tracking on
+/// `args.threads` threads with trackers from `tracker`.
+fn write_results(
+    args: &ReplayArgs,
+    frames: &Frames,
+    overlay_names: &[String],
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
-    let frames = list_frames(&args.frames_dir)?;
-    let overlay_names = check_outputs(args, &frames, reference)?;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
@@ -131,69 +192,83 @@ pub fn replay(
         File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
     let mut csv = BufWriter::new(file);
     writeln!(csv, "{}", results::header(args.timing))?;
-    let progress = progress_bar(frames.len());
-    let mut times_ms = Vec::with_capacity(frames.len());
-    let mut summary = ReplaySummary {
-        frames: frames.len(),
-        detected: 0,
-        unreadable: 0,
-        with_scale: 0,
-        metadata_warnings: 0,
-        median_ms: None,
+    let progress = progress_bar(frames.count());
+    let job = Job {
+        frames,
+        overlay_names,
+        overlay: args.overlay.as_deref(),
+        timing: args.timing,
+        coherence: !args.no_coherence,
     };
-    for (path, overlay_name) in frames.iter().zip(&overlay_names) {
-        let name = path
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().to_string());
-        let sem = frame_metadata(path, &mut summary, &progress);
-        match load_gray(path) {
-            Ok(image) => {
-                let started = Instant::now();
-                let estimate = tracker.track(&image);
-                let ms = started.elapsed().as_secs_f64() * 1e3;
-                times_ms.push(ms);
-                summary.detected += usize::from(estimate.detected);
-                let ms_column = args.timing.then_some(ms);
-                let written = estimate.with_pixel_origin(tracker.pixel_origin());
-                results::write_row(&mut csv, &name, &written, &sem, ms_column)?;
-                if let Some(dir) = &args.overlay {
-                    let out = dir.join(overlay_name);
-                    draw_overlay(&image, &estimate)
-                        .save(&out)
-                        .with_context(|| format!("writing {}", out.display()))?;
-                }
-            }
-            Err(e) => {
-                progress.suspend(|| tracing::warn!("{e}; recorded as not detected"));
-                summary.unreadable += 1;
-                // Coherence must not carry over a gap in the sequence.
-                tracker.reset();
-                results::write_unreadable(&mut csv, &name, args.timing)?;
-            }
-        }
-        progress.inc(1);
-    }
+    let threads = args.threads.map_or_else(default_threads, usize::from);
+    let done = |n: usize| progress.inc(n as u64);
+    let mut counts = replay_frames(&job, threads, tracker, &mut csv, &done)?;
     progress.finish_and_clear();
     csv.flush()
         .with_context(|| format!("writing {}", args.csv.display()))?;
-    times_ms.sort_by(f64::total_cmp);
-    summary.median_ms = times_ms.get(times_ms.len() / 2).copied();
-    Ok(summary)
+    counts.times_ms.sort_by(f64::total_cmp);
+    Ok(ReplaySummary {
+        frames: counts.frames,
+        detected: counts.detected,
+        unreadable: counts.unreadable,
+        with_scale: counts.with_scale,
+        metadata_warnings: counts.metadata_warnings,
+        median_ms: counts.times_ms.get(counts.times_ms.len() / 2).copied(),
+    })
 }
 
-/// The SEM metadata of one frame; problems are warned about (the first few in full) and
-/// counted.
-fn frame_metadata(path: &Path, summary: &mut ReplaySummary, progress: &ProgressBar) -> SemMetadata {
-    let sem = read_sem_metadata(path);
-    summary.with_scale += usize::from(sem.pixel_size_um.is_some());
-    if !sem.warnings.is_empty() {
-        summary.metadata_warnings += 1;
-        if summary.metadata_warnings <= METADATA_WARNINGS_SHOWN {
-            let text = sem.warnings.join("; ");
-            progress.suspend(|| tracing::warn!("{}: SEM metadata: {text}", path.display()));
-        }
+/// The cores this process may use.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Replays the frames of `args.frames_dir` into `args.csv`.
+pub fn replay(
+    args: &ReplayArgs,
+    inputs: &Inputs,
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+) -> anyhow::Result<ReplaySummary> {
+    let frames = list_frames(&args.frames_dir)?;
+    let overlay_names = check_outputs(args, &frames, inputs)?;
+    write_results(args, &Frames::Files(frames), &overlay_names, tracker)
+}
+
+/// Replays a session recorded by `nanoforce run` (its `frames.nfrm`, in recorded order)
+/// into `args.csv`. Frames the recording dropped leave a gap in `frame_seq`; the tracker
+/// goes on across it, as the live tracker did across the frames it never saw.
+pub fn replay_session(
+    args: &ReplayArgs,
+    info: &SessionInfo,
+    inputs: &Inputs,
+    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+) -> anyhow::Result<ReplaySummary> {
+    let session_json = args.frames_dir.join(SESSION_FILE);
+    let Some(path) = info.frames_path(&args.frames_dir) else {
+        anyhow::bail!(
+            "{}: this session recorded no frames (no frames_file)",
+            session_json.display()
+        );
+    };
+    check_outputs(args, &[path.clone(), session_json], inputs)?;
+    let index = FrameFile::open(&path)?.index()?;
+    if index.skipped_bytes > 0 {
+        tracing::warn!(
+            "{}: skipped {} bytes that were not a frame",
+            path.display(),
+            index.skipped_bytes
+        );
     }
-    sem
+    let overlay_names: Vec<String> = index
+        .frames
+        .iter()
+        .map(|(h, _)| format!("frame_{:08}.png", h.sequence))
+        .collect();
+    let frames = Frames::Recorded {
+        path,
+        frames: index.frames,
+        anchor: info.anchor,
+    };
+    write_results(args, &frames, &overlay_names, tracker)
 }
 
 /// The overlay file name of `frame`: a PNG frame keeps its name (`x.png`), any other
@@ -212,19 +287,20 @@ pub fn overlay_name(frame: &Path) -> String {
     }
 }
 
-/// Refuses outputs that would overwrite an input; returns each frame's overlay name.
+/// Refuses outputs that would overwrite an input (`frames`: the frame files, or a
+/// session's frames file and description); returns each frame's overlay name.
 fn check_outputs(
     args: &ReplayArgs,
     frames: &[PathBuf],
-    reference: Option<&Path>,
+    files: &Inputs,
 ) -> anyhow::Result<Vec<String>> {
     let mut inputs: HashMap<PathBuf, String> = HashMap::new();
     for frame in frames {
         inputs.insert(resolved(frame), format!("the frame {}", frame.display()));
     }
-    let config = format!("the configuration {}", args.config.display());
-    inputs.insert(resolved(&args.config), config);
-    if let Some(reference) = reference {
+    let config = format!("the configuration {}", files.config.display());
+    inputs.insert(resolved(files.config), config);
+    if let Some(reference) = files.reference {
         let what = format!("the reference image {}", reference.display());
         inputs.insert(resolved(reference), what);
     }
@@ -295,6 +371,7 @@ pub(crate) fn resolved(path: &Path) -> PathBuf {
     out
 }
 
+/// A progress bar on a terminal.
 fn progress_bar(len: usize) -> ProgressBar {
     if !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();

@@ -146,6 +146,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let options = RunOptions {
         duration,
         session_dir: session_dir.clone(),
+        config_file: args
+            .config
+            .as_deref()
+            .map(std::path::absolute)
+            .transpose()?,
         status_line: !args.quiet,
         handle_signals: true,
         reload: reload_path.map(|path| {

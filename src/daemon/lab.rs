@@ -86,17 +86,8 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
                 None => anyhow::bail!("no tracker for the configured frames"),
             },
             None => {
-                let contact = Contact {
-                    sample: config.sim.sample.clone(),
-                    cantilever: config.cantilever,
-                    press_direction: teleop.press_direction_stage,
-                };
-                let scene =
-                    SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign);
-                let (reference, clicks) =
-                    scene.reference(config.tracker.threshold, config.tracker.window_deg);
-                let calibration = calibrate(config, &reference, &clicks)?;
-                let tracker = Tracker::new(&config.tracker, calibration, Some(config.cantilever));
+                let scene = sim_scene(config);
+                let tracker = sim_tracker(config, &scene)?;
                 // Without the simulated stage the simulated probe hangs free.
                 (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
             }
@@ -132,6 +123,38 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
         stage,
         haptic,
     })
+}
+
+/// The simulated SEM of `config`'s `[sim]` sections.
+fn sim_scene(config: &Config) -> SemScene {
+    let teleop = &config.teleop;
+    let contact = Contact {
+        sample: config.sim.sample.clone(),
+        cantilever: config.cantilever,
+        press_direction: teleop.press_direction_stage,
+    };
+    SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign)
+}
+
+/// The tracker calibrated on the simulated SEM's reference frame and clicks.
+fn sim_tracker(config: &Config, scene: &SemScene) -> anyhow::Result<Tracker> {
+    let (reference, clicks) = scene.reference(config.tracker.threshold, config.tracker.window_deg);
+    let calibration = calibrate(config, &reference, &clicks)?;
+    Ok(Tracker::new(
+        &config.tracker,
+        calibration,
+        Some(config.cantilever),
+    ))
+}
+
+/// The tracker a live run of `config` uses: calibrated on the simulated SEM's reference
+/// with `[frames] backend = "sim"`, else on `[tracker.calibration]`. Replaying a
+/// recorded session with it tracks its frames as the run did.
+pub fn live_tracker(config: &Config) -> anyhow::Result<Tracker> {
+    match config.devices.frames {
+        FramesBackend::Sim => sim_tracker(config, &sim_scene(config)),
+        _ => tracker_from_config(config),
+    }
 }
 
 /// The tracker a configuration describes, calibrated on its `[tracker.calibration]`

@@ -7,6 +7,8 @@
 //! - `telemetry`: drains the loops' records into the session folder;
 //! - `stream` (when `[stream]` asks for it): the live UDP data stream of estimates and
 //!   the haptic state, fed through wait-free rings;
+//! - `frame-recorder`: writes the frames the tracker saw into the session's
+//!   `frames.nfrm` ([`frame_record`]);
 //! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
 //!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
 //! - the supervisor, on a small tokio runtime: signals (SIGHUP reloads the gains;
@@ -22,6 +24,7 @@
 //! tracker pass or a 1 kHz deadline must never wait on an executor, and async is only
 //! the wiring around them.
 pub mod config;
+pub mod frame_record;
 pub mod haptic_loop;
 pub mod inject;
 pub mod instance;

@@ -5,7 +5,8 @@
 //!   slow tracker never queues latency.
 //! - `tracker`: takes the newest frame, runs the [`Estimator`] on it and publishes the
 //!   estimate (time of the frame, angle, force, apex, confidence, detected) into the
-//!   triple buffer the haptic loop reads.
+//!   triple buffer the haptic loop reads, then hands the frame to the session's frame
+//!   recorder (a copy into a bounded queue, never a wait).
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
@@ -13,6 +14,7 @@ use std::time::Duration;
 
 use image::GrayImage;
 
+use super::frame_record::FrameTap;
 use super::snapshot::{EdgeSegments, SnapshotTap};
 use super::stats::{ForceErrors, Histogram};
 use super::stream::EstimateTap;
@@ -151,6 +153,8 @@ pub struct TrackerSide {
     pub snapshots: Option<SnapshotTap>,
     /// The live data stream's ring (see [`super::stream`]), when `[stream]` is on.
     pub stream: Option<EstimateTap>,
+    /// Copies for the session's frames file (see [`super::frame_record`]), when recorded.
+    pub recording: Option<FrameTap>,
 }
 
 /// Runs the tracker loop on the calling thread (spawned by the supervisor as `tracker`).
@@ -194,6 +198,9 @@ pub fn run_tracker(
         }
         if let Some(tap) = side.snapshots.as_mut() {
             tap.offer(published_s, &frame.image, &published, &edges);
+        }
+        if let Some(tap) = side.recording.as_mut() {
+            tap.offer(&frame.image, &frame.meta);
         }
         let _ = side.telemetry.push(EstimateRecord {
             estimate: published,

@@ -131,6 +131,17 @@ pub struct RecordingStats {
     /// "off" (`--no-record`), "recording" (complete), "stopped" (see `error`).
     pub state: String,
     pub error: Option<String>,
+    /// Frames written to `frames.nfrm`.
+    pub frames_recorded: u64,
+    /// Tracked frames not written: the writer was behind (its queue full), or the
+    /// frames had stopped (`frames_stopped`, or the recording stopped).
+    pub frames_dropped: u64,
+    /// The size of `frames.nfrm`, MB (10^6 bytes).
+    #[serde(rename = "frames_MB")]
+    pub frames_mb: f64,
+    /// The frames reached their share of `[daemon] recordings_max_mb` and stopped (the
+    /// telemetry went on).
+    pub frames_stopped: bool,
 }
 
 /// Resident set size, sampled once a second by the supervisor.
@@ -301,6 +312,10 @@ mod tests {
             recording: RecordingStats {
                 state: "stopped".into(),
                 error: Some("No space left on device".into()),
+                frames_recorded: 120,
+                frames_dropped: 3,
+                frames_mb: 36.9,
+                frames_stopped: false,
             },
             stream: Some(StreamStats {
                 estimates_sent: 59,
@@ -318,6 +333,8 @@ mod tests {
         assert_eq!(json["recording"]["state"], "stopped");
         assert_eq!(json["stream"]["estimates_dropped"], 1);
         assert_eq!(json["stream"]["send_errors"], 0);
+        assert_eq!(json["recording"]["frames_dropped"], 3);
+        assert_eq!(json["recording"]["frames_MB"], 36.9);
     }
 
     #[test]

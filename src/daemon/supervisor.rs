@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use tokio::sync::mpsc as async_mpsc;
 
+use super::frame_record::{FrameRecorder, FrameWriter, FRAMES_SHARE};
 use super::haptic_loop::{GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::inject::{PanicInjection, PanickingEstimator, PanickingFrames, PanickingHaptic};
 use super::notify::Notifier;
@@ -30,6 +31,7 @@ use crate::hw::frames::FrameSource;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
 use crate::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
+use crate::session::utc::UtcAnchor;
 
 /// The opened devices and the tracker, ready to run.
 pub struct Devices {
@@ -45,6 +47,9 @@ pub struct RunOptions {
     pub duration: Option<Duration>,
     /// Record telemetry into this session folder.
     pub session_dir: Option<PathBuf>,
+    /// The configuration file the run loaded (absolute; None: built in), named in the
+    /// session's `session.json`.
+    pub config_file: Option<PathBuf>,
     /// Print a live status line on standard error.
     pub status_line: bool,
     /// Handle SIGINT/SIGTERM (stop) and SIGHUP (reload gains through `reload`).
@@ -85,6 +90,7 @@ impl Default for RunOptions {
         RunOptions {
             duration: None,
             session_dir: None,
+            config_file: None,
             status_line: false,
             handle_signals: false,
             reload: None,
@@ -209,6 +215,7 @@ struct Threads {
     tracker: Option<JoinHandle<TrackerReport>>,
     haptic: Option<JoinHandle<LoopReport>>,
     recorder: Option<(JoinHandle<std::io::Result<()>>, Arc<AtomicBool>)>,
+    frame_recorder: Option<FrameRecorder>,
     events: mpsc::Sender<String>,
     gains: rtrb::Producer<TeleopGains>,
     monitor: Option<MonitorHandle>,
@@ -331,6 +338,9 @@ impl Threads {
             if join_within(frames, JOIN_LIMIT).is_none() {
                 tracing::warn!("frame source still blocked in a read; not waiting for it");
             }
+        }
+        if let Some(frame_recorder) = self.frame_recorder.take() {
+            frame_recorder.finish(JOIN_LIMIT * 2);
         }
         if let Some((handle, stop)) = self.recorder.take() {
             stop.store(true, Ordering::Relaxed);
@@ -503,11 +513,31 @@ fn spawn_threads(
         _ => (None, None),
     };
 
+    let anchor = UtcAnchor::measure(&clock);
+    let (frame_tap, frame_recorder) = match &options.session_dir {
+        Some(dir) => {
+            let writer = FrameWriter {
+                dir: dir.clone(),
+                max_bytes: options
+                    .recordings_budget
+                    .as_ref()
+                    .map(|b| (b.max_bytes as f64 * FRAMES_SHARE) as u64),
+                events: events_tx.clone(),
+            };
+            let (tap, recorder) = FrameRecorder::start(writer, clock, recording.clone())
+                .context("starting the frame-recorder thread")?;
+            (Some(tap), Some(recorder))
+        }
+        None => (None, None),
+    };
     let recorder = match &options.session_dir {
         Some(dir) => {
             let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
             let recorder = Recorder {
                 dir: dir.clone(),
+                anchor,
+                records_frames: frame_recorder.is_some(),
+                config_file: options.config_file.clone(),
                 pixel_origin: options.pixel_origin,
                 ticks: ticks_rx,
                 estimates: est_rx,
@@ -531,6 +561,7 @@ fn spawn_threads(
             telemetry: est_tx,
             snapshots,
             stream: estimate_tap,
+            recording: frame_tap,
         };
         let estimator = devices.estimator;
         thread::Builder::new()
@@ -569,6 +600,7 @@ fn spawn_threads(
         tracker: Some(tracker),
         haptic: Some(haptic),
         recorder,
+        frame_recorder,
         events: events_tx,
         gains: gains_tx,
         monitor,
@@ -720,9 +752,14 @@ async fn supervise(
 }
 
 fn recording_stats(recording: &RecordingStatus) -> RecordingStats {
+    let frames = &recording.frames;
     RecordingStats {
         state: recording.state().as_str().into(),
         error: recording.error(),
+        frames_recorded: frames.recorded.load(Ordering::Relaxed),
+        frames_dropped: frames.dropped.load(Ordering::Relaxed),
+        frames_mb: frames.bytes.load(Ordering::Relaxed) as f64 / 1e6,
+        frames_stopped: frames.stopped.load(Ordering::Relaxed),
     }
 }
 
@@ -786,6 +823,14 @@ fn dead_thread(threads: &Threads) -> Option<String> {
     }
     if ended(threads.recorder.as_ref().map(|(h, _)| h.is_finished())) {
         return Some("telemetry".into());
+    }
+    if ended(
+        threads
+            .frame_recorder
+            .as_ref()
+            .map(FrameRecorder::is_finished),
+    ) {
+        return Some("frame-recorder".into());
     }
     if threads
         .monitor

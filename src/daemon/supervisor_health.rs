@@ -193,10 +193,14 @@ impl Health {
         } else {
             0.0
         };
-        let recording = match self.recording.state() {
+        let mut recording = match self.recording.state() {
             RecordingState::Stopped => format!(" | {}", self.recording.describe()),
             _ => String::new(),
         };
+        let unrecorded = self.recording.frames.dropped.load(Ordering::Relaxed);
+        if unrecorded > 0 {
+            recording.push_str(&format!(" | {unrecorded} frames not recorded"));
+        }
         self.status_text = format!(
             "{} | haptic {:.0} Hz, {} overruns | frames {:.1}/s, tracked {:.1}/s, detected {:.0}%, dropped {} | stale events {}, faults {}{recording}",
             self.state.as_str(),

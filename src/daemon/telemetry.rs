@@ -3,9 +3,12 @@
 //! a background writer thread drains them into CSV files, so disk latency never reaches
 //! the loops.
 //!
-//! A session folder holds `config.toml` (the configuration the run used), `ticks.csv`
-//! (the haptic loop, decimated), `estimates.csv` (one row per tracked frame) and
-//! `events.log` (faults and state changes, written as they happen).
+//! A session folder holds `config.toml` (the configuration the run used),
+//! `session.json` (the UTC time of t = 0, see [`UtcAnchor`]), `ticks.csv` (the haptic
+//! loop, decimated), `estimates.csv` (one row per tracked frame), `events.log` (faults
+//! and state changes, written as they happen) and `frames.nfrm` (the frames the tracker
+//! saw, written by [`super::frame_record`]). Both CSVs end with a `utc` column: the
+//! row's time (`t_s`, `frame_time_s`) in UTC.
 //!
 //! A write that fails (a full disk) stops the recording and says so; the loops go on.
 //! `[daemon] recordings_max_mb` bounds the sessions: the oldest are deleted at start
@@ -18,10 +21,13 @@ use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use super::frame_record::{FrameRecordShared, FRAMES_FILE};
 use super::haptic_loop::TickRecord;
 use super::inject::PanicInjection;
 use super::pipeline::EstimateRecord;
 use crate::config::PixelOrigin;
+use crate::session::live::{SessionInfo, SESSION_FILE};
+use crate::session::utc::{civil_from_days, UtcAnchor};
 
 /// The state directory: `$STATE_DIRECTORY` (set by systemd's StateDirectory=), else
 /// `$XDG_STATE_HOME/nanoforce`, else `~/.local/state/nanoforce`.
@@ -58,19 +64,10 @@ pub fn create_session_dir(state_dir: &Path) -> io::Result<PathBuf> {
     Ok(dir)
 }
 
-/// `YYYYmmddTHHMMSSZ` from Unix seconds (civil-from-days, proleptic Gregorian).
+/// `YYYYmmddTHHMMSSZ` from Unix seconds.
 fn utc_stamp(secs: u64) -> String {
-    let days = (secs / 86_400) as i64;
+    let (year, month, day) = civil_from_days((secs / 86_400) as i64);
     let rem = secs % 86_400;
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
     format!(
         "{year:04}{month:02}{day:02}T{:02}{:02}{:02}Z",
         rem / 3600,
@@ -85,6 +82,8 @@ fn utc_stamp(secs: u64) -> String {
 pub struct RecordingStatus {
     state: AtomicU8,
     error: Mutex<Option<String>>,
+    /// The recorded frames (`frames.nfrm`).
+    pub frames: FrameRecordShared,
 }
 
 /// What [`RecordingStatus`] says.
@@ -168,6 +167,12 @@ const BUDGET_EVERY: Duration = Duration::from_secs(10);
 /// The writer thread's inputs.
 pub struct Recorder {
     pub dir: PathBuf,
+    /// The UTC time of the clock's t = 0.
+    pub anchor: UtcAnchor,
+    /// Whether `frames.nfrm` is recorded (named in `session.json`).
+    pub records_frames: bool,
+    /// The configuration file the run loaded (None: built in), for `session.json`.
+    pub config_file: Option<PathBuf>,
     /// `tracker.pixel_origin`: where the apex columns count from.
     pub pixel_origin: PixelOrigin,
     pub ticks: rtrb::Consumer<TickRecord>,
@@ -187,13 +192,21 @@ struct Files {
 }
 
 impl Files {
-    fn create(dir: &Path) -> io::Result<Files> {
+    fn create(dir: &Path, info: &SessionInfo) -> io::Result<Files> {
+        let named = |path: &Path, e: io::Error| {
+            io::Error::new(e.kind(), format!("{}: {e}", path.display()))
+        };
         let open = |name: &str| {
             let path = dir.join(name);
             File::create(&path)
                 .map(BufWriter::new)
-                .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", path.display())))
+                .map_err(|e| named(&path, e))
         };
+        let session_json = dir.join(SESSION_FILE);
+        serde_json::to_string_pretty(info)
+            .map_err(io::Error::other)
+            .and_then(|json| fs::write(&session_json, json + "\n"))
+            .map_err(|e| named(&session_json, e))?;
         let mut files = Files {
             ticks: open("ticks.csv")?,
             estimates: open("estimates.csv")?,
@@ -203,12 +216,18 @@ impl Files {
             files.ticks,
             "t_s,period_us,pos_x_mm,pos_y_mm,pos_z_mm,force_x_n,force_y_n,force_z_n,\
              vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
-             gate_attenuated"
+             gate_attenuated,utc"
         )?;
         writeln!(
             files.estimates,
             "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
-             confidence,processing_ms,true_force_nN"
+             confidence,processing_ms,true_force_nN,utc"
+        )?;
+        writeln!(
+            files.events,
+            "session start: t = 0 s is {} UTC (CLOCK_MONOTONIC {:.9} s)",
+            info.t0_utc,
+            info.anchor.t0_monotonic_ns as f64 * 1e-9
         )?;
         files.flush()?;
         Ok(files)
@@ -239,7 +258,13 @@ fn record(mut recorder: Recorder, stop: &AtomicBool) -> io::Result<()> {
     let status = recorder.status.clone();
     let dir = recorder.dir.clone();
     let fail = |e: io::Error| status.stop(format!("{}: {e}", dir.display()));
-    let mut files = match Files::create(&recorder.dir) {
+    let frames_file = recorder.records_frames.then_some(FRAMES_FILE);
+    let info = SessionInfo::new(
+        recorder.anchor,
+        frames_file,
+        recorder.config_file.as_deref(),
+    );
+    let mut files = match Files::create(&recorder.dir, &info) {
         Ok(files) => Some(files),
         Err(e) => {
             fail(e);
@@ -292,10 +317,15 @@ fn record(mut recorder: Recorder, stop: &AtomicBool) -> io::Result<()> {
 
 fn drain(recorder: &mut Recorder, files: &mut Files) -> io::Result<()> {
     while let Ok(r) = recorder.ticks.pop() {
-        write_tick(&mut files.ticks, &r)?;
+        write_tick(&mut files.ticks, &r, &recorder.anchor)?;
     }
     while let Ok(r) = recorder.estimates.pop() {
-        write_estimate(&mut files.estimates, &r, recorder.pixel_origin)?;
+        write_estimate(
+            &mut files.estimates,
+            &r,
+            recorder.pixel_origin,
+            &recorder.anchor,
+        )?;
     }
     let mut wrote_event = false;
     while let Ok(line) = recorder.events.try_recv() {
@@ -391,24 +421,30 @@ pub fn prune_sessions(budget: &Budget, keep: Option<&Path>) -> Vec<PathBuf> {
     pruned
 }
 
-fn write_tick(out: &mut impl Write, r: &TickRecord) -> io::Result<()> {
+fn write_tick(out: &mut impl Write, r: &TickRecord, anchor: &UtcAnchor) -> io::Result<()> {
     let [px, py, pz] = r.position_mm;
     let [fx, fy, fz] = r.force_n;
     let [vx, vy, vz] = r.velocity_um_s;
     writeln!(
         out,
-        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{},{},{}",
+        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{},{},{},{}",
         r.t_s,
         r.period_us,
         r.rendered_force_nn,
         r.state.as_str(),
         u8::from(r.press_blocked),
         r.gate_held,
-        r.gate_attenuated
+        r.gate_attenuated,
+        anchor.utc(r.t_s)
     )
 }
 
-fn write_estimate(out: &mut impl Write, r: &EstimateRecord, origin: PixelOrigin) -> io::Result<()> {
+fn write_estimate(
+    out: &mut impl Write,
+    r: &EstimateRecord,
+    origin: PixelOrigin,
+    anchor: &UtcAnchor,
+) -> io::Result<()> {
     let e = &r.estimate;
     let apex = origin.output(e.apex_px);
     let opt = |v: f64| {
@@ -420,7 +456,7 @@ fn write_estimate(out: &mut impl Write, r: &EstimateRecord, origin: PixelOrigin)
     };
     writeln!(
         out,
-        "{},{},{:.6},{:.6},{},{},{},{},{},{:.4},{:.3},{}",
+        "{},{},{:.6},{:.6},{},{},{},{},{},{:.4},{:.3},{},{}",
         e.seq,
         e.frame_sequence,
         e.frame_time_s,
@@ -432,7 +468,8 @@ fn write_estimate(out: &mut impl Write, r: &EstimateRecord, origin: PixelOrigin)
         opt(apex[1]),
         e.confidence,
         r.processing_ms,
-        r.true_force_nn.map_or(String::new(), |f| format!("{f}"))
+        r.true_force_nn.map_or(String::new(), |f| format!("{f}")),
+        anchor.utc(e.frame_time_s)
     )
 }
 
@@ -507,9 +544,13 @@ mod tests {
             processing_ms: 0.8,
             true_force_nn: None,
         };
+        let anchor = UtcAnchor {
+            t0_unix_ns: 1_796_256_068_000_000_000,
+            t0_monotonic_ns: 1,
+        };
         let line = |r: &EstimateRecord, origin| {
             let mut out = Vec::new();
-            write_estimate(&mut out, r, origin).unwrap();
+            write_estimate(&mut out, r, origin, &anchor).unwrap();
             String::from_utf8(out).unwrap()
         };
         let centre = line(&record(true), PixelOrigin::Centre);
@@ -519,5 +560,10 @@ mod tests {
         // No apex stays empty whichever the origin.
         let missed = line(&record(false), PixelOrigin::Corner);
         assert!(missed.contains(",0,,,,,0.9000,"), "{missed}");
+        // The frame's capture time in UTC ends the row.
+        assert!(
+            missed.ends_with(",0.9000,0.800,,2026-12-03T00:01:09.000000Z\n"),
+            "{missed}"
+        );
     }
 }

@@ -164,6 +164,7 @@ impl Producer {
             "fault": state.is_fault(),
             "recording": self.view.recording.state().as_str(),
             "recording_error": self.view.recording.error(),
+            "recording_frames_dropped": self.view.recording.frames.dropped.load(Ordering::Relaxed),
             "rates": self.rates.json,
             "counters": {
                 "overruns": l.overruns.load(Ordering::Relaxed),

@@ -4,6 +4,8 @@
 //! small RFC 4180 reader every session CSV is read through.
 pub mod csv;
 pub mod frames;
+pub mod live;
 pub mod metadata;
 pub mod results;
 pub mod score;
+pub mod utc;

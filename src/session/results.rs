@@ -4,7 +4,10 @@
 //! noise and the calibration's (`angle_sigma_deg`), scale, the edges' support, the SEM's
 //! scale from the frame's metadata (`px_per_um`, `magnification`, the apex in
 //! micrometres: empty without metadata), the found edge segments
-//! (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for pictures) and `miss`.
+//! (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for pictures), `miss`, and where
+//! the frame came from: `frame_seq` (a recorded session's frame sequence number, as in
+//! its `estimates.csv`; a folder's frames count 1, 2, ... in file-name order) and `utc`
+//! (a recorded frame's capture time, ISO 8601 UTC; empty for a folder of frames).
 //! Without timing the file is a pure function of the frames and the configuration: a
 //! replay run twice gives byte-identical output.
 //! [`read_results`] reads it back (for `report`).
@@ -22,7 +25,7 @@ pub fn header(timing: bool) -> String {
          force_saturated,\
          red_support,blue_support,green_support,px_per_um,magnification,tip_x_um,tip_y_um,\
          red_x0,red_y0,red_x1,red_y1,blue_x0,blue_y0,blue_x1,blue_y1,\
-         green_x0,green_y0,green_x1,green_y1,miss",
+         green_x0,green_y0,green_x1,green_y1,miss,frame_seq,utc",
     );
     if timing {
         h.push_str(",processing_ms");
@@ -35,10 +38,20 @@ pub fn miss_name(miss: Option<Miss>) -> &'static str {
     miss.map_or("", Miss::name)
 }
 
+/// Which frame a row is about.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameLabel<'a> {
+    /// The `frame` column: a file name, or a recorded frame's sequence number.
+    pub name: &'a str,
+    pub seq: u64,
+    /// The capture time, ISO 8601 UTC (empty: unknown).
+    pub utc: &'a str,
+}
+
 /// One row for a tracked frame; `sem` is the frame's metadata (may be empty).
 pub fn write_row(
     out: &mut impl Write,
-    frame: &str,
+    frame: &FrameLabel,
     e: &Estimate,
     sem: &SemMetadata,
     processing_ms: Option<f64>,
@@ -50,8 +63,8 @@ pub fn write_row(
     let support = |edge: Edge| e.edges[edge.index()].map_or(0, |f| f.support);
     write!(
         out,
-        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{}",
-        csv_field(frame),
+        "{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{}",
+        csv_field(frame.name),
         u8::from(e.detected),
         fixed(e.angle_deg, 6),
         fixed(e.force_nn, 4),
@@ -67,6 +80,8 @@ pub fn write_row(
         scale_columns(e, sem),
         edge_columns(&e.edges),
         miss_name(e.miss),
+        frame.seq,
+        frame.utc,
     )?;
     if let Some(ms) = processing_ms {
         write!(out, ",{ms:.3}")?;
@@ -108,13 +123,15 @@ fn edge_columns(edges: &[Option<EdgeFit>; 3]) -> String {
 }
 
 /// A row for a frame that could not be decoded: not detected, reason in `miss`.
-pub fn write_unreadable(out: &mut impl Write, frame: &str, timing: bool) -> io::Result<()> {
+pub fn write_unreadable(out: &mut impl Write, frame: &FrameLabel, timing: bool) -> io::Result<()> {
     write!(
         out,
-        "{},0,,,,,0.0000,,,0,0,0,0{}unreadable",
-        csv_field(frame),
+        "{},0,,,,,0.0000,,,0,0,0,0{}unreadable,{},{}",
+        csv_field(frame.name),
         // the 4 scale and 12 edge columns, empty
-        ",".repeat(17)
+        ",".repeat(17),
+        frame.seq,
+        frame.utc
     )?;
     if timing {
         write!(out, ",")?;
@@ -145,6 +162,8 @@ pub struct ResultRow {
     /// Start and end of red, blue, green, frame pixels.
     pub edges: [Option<[[f64; 2]; 2]>; 3],
     pub miss: String,
+    /// The frame's sequence number (absent in older results).
+    pub frame_seq: Option<u64>,
     pub processing_ms: Option<f64>,
 }
 
@@ -195,6 +214,7 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
         .map(|e| ["x0", "y0", "x1", "y1"].map(|k| col(&format!("{}_{k}", e.name()))))
         .collect();
     let miss = col("miss");
+    let frame_seq = col("frame_seq");
     let mut rows = Vec::new();
     for record in &table.rows {
         let num = |i: Option<usize>| record.number(i);
@@ -222,6 +242,7 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
             magnification: num(mag),
             edges,
             miss: record.cell(miss).to_string(),
+            frame_seq: record.cell(frame_seq).parse().ok(),
             processing_ms: num(ms),
         });
     }
@@ -268,9 +289,14 @@ mod tests {
             magnification: Some(2000.0),
             ..SemMetadata::default()
         };
+        let label = |name| FrameLabel {
+            name,
+            seq: 3,
+            utc: "",
+        };
         write_row(
             &mut out,
-            "f.png",
+            &label("f.png"),
             &Estimate::missed(Miss::Inconsistent, 0.2),
             &sem,
             None,
@@ -279,22 +305,23 @@ mod tests {
         assert_eq!(
             String::from_utf8(out).unwrap(),
             format!(
-                "f.png,0,,,,,0.2000,,,0,0,0,0,10.00000,2000.0,,,{}inconsistent\n",
+                "f.png,0,,,,,0.2000,,,0,0,0,0,10.00000,2000.0,,,{}inconsistent,3,\n",
                 ",".repeat(12)
             )
         );
         let mut out = Vec::new();
-        write_unreadable(&mut out, "a,b.png", true).unwrap();
+        write_unreadable(&mut out, &label("a,b.png"), true).unwrap();
         let line = String::from_utf8(out).unwrap();
-        assert!(line.ends_with(",unreadable,\n"), "{line}");
+        assert!(line.ends_with(",unreadable,3,,\n"), "{line}");
         let columns = header(true).split(',').count();
-        assert_eq!(columns, 31);
+        assert_eq!(columns, 33);
         let cells = &super::super::csv::records(&line).unwrap()[0].cells;
         assert_eq!(cells.len(), columns);
         let rows = parse_results(&format!("{}\n{line}", header(true))).unwrap();
         assert_eq!(rows[0].frame, "a,b.png");
         assert!(!rows[0].detected && rows[0].tip_px.is_none());
         assert_eq!(rows[0].miss, "unreadable");
+        assert_eq!(rows[0].frame_seq, Some(3));
     }
 
     #[test]
@@ -328,7 +355,12 @@ mod tests {
         };
         let mut out = header(true).into_bytes();
         out.push(b'\n');
-        write_row(&mut out, "f.tif", &estimate, &sem, Some(3.25)).unwrap();
+        let label = FrameLabel {
+            name: "f.tif",
+            seq: 17,
+            utc: "2026-12-03T00:01:08.123456Z",
+        };
+        write_row(&mut out, &label, &estimate, &sem, Some(3.25)).unwrap();
         let text = String::from_utf8(out).unwrap();
         let row = text.lines().nth(1).unwrap();
         assert!(row.contains(",20.00000,4000.0,16.0250,12.0125,"), "{row}");
@@ -342,6 +374,11 @@ mod tests {
         assert_eq!(r.edges[1], None);
         assert_eq!(r.edges[2], Some([[320.5, 240.25], [340.0, 210.0]]));
         assert_eq!(r.processing_ms, Some(3.25));
+        assert_eq!(r.frame_seq, Some(17));
+        assert!(
+            row.ends_with(",17,2026-12-03T00:01:08.123456Z,3.250"),
+            "{row}"
+        );
     }
 
     #[test]

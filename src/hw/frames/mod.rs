@@ -1,6 +1,7 @@
 //! SEM frames: a [`FrameSource`] blocks until the next frame, fills a reused grey buffer
 //! and says when it was captured (on the daemon's [`Clock`](crate::hw::Clock)).
-//! Backends: [`sim`] and [`pipe`] (always), `v4l2` (cargo feature `v4l2`).
+//! Backends: [`sim`] and [`pipe`] (always), `v4l2` (cargo feature `v4l2`);
+//! [`recording`] reads the frames a session recorded back.
 use image::GrayImage;
 
 /// What comes with a frame.
@@ -44,6 +45,7 @@ pub trait FrameSource: Send {
 pub mod config;
 pub mod convert;
 pub mod pipe;
+pub mod recording;
 pub mod sim;
 #[cfg(feature = "v4l2")]
 pub mod v4l2;
