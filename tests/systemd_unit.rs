@@ -1,6 +1,9 @@
 //! The systemd unit and the udev rules agree and stay narrow: no deprecated
 //! udev-settle ordering, no device class that opens every HID or serial device, and the
-//! haptic device's group and stable name in the rules are the ones the unit uses.
+//! haptic device's group and stable name in the rules are the ones the unit uses. The
+//! Debian package (`[package.metadata.deb]`) installs the binary and the configuration
+//! the unit runs, and its sysusers.d and tmpfiles.d entries make the unit's user, groups
+//! and state directory.
 use std::path::Path;
 
 fn read(path: &str) -> String {
@@ -85,4 +88,117 @@ fn udev_rules_give_the_unit_its_groups_and_names() {
             "the {kernel} rule matches the device and names it: {rule}"
         );
     }
+}
+
+/// `[package.metadata.deb]` of Cargo.toml: its assets as (source, destination) pairs.
+fn package_assets() -> Vec<(String, String)> {
+    let manifest: toml::Table = toml::from_str(&read("Cargo.toml")).expect("Cargo.toml parses");
+    let deb = &manifest["package"]["metadata"]["deb"];
+    deb["assets"]
+        .as_array()
+        .expect("[package.metadata.deb] assets")
+        .iter()
+        .map(|a| {
+            let a = a.as_array().expect("an asset is [source, dest, mode]");
+            (
+                a[0].as_str().unwrap_or_default().to_string(),
+                a[1].as_str().unwrap_or_default().to_string(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_package_installs_what_the_unit_runs() {
+    let unit = read("systemd/nanoforce.service");
+    let exec = values(&unit, "ExecStart");
+    let argv: Vec<&str> = exec
+        .first()
+        .expect("ExecStart=")
+        .split_whitespace()
+        .collect();
+    let assets = package_assets();
+    let dest_of = |source: &str| {
+        assets
+            .iter()
+            .find(|(s, _)| s == source)
+            .map(|(_, d)| d.clone())
+            .unwrap_or_else(|| panic!("the package does not install {source}: {assets:?}"))
+    };
+    let bin_dir = dest_of("target/release/nanoforce");
+    assert_eq!(
+        argv[0],
+        format!("/{bin_dir}nanoforce"),
+        "ExecStart={exec:?}"
+    );
+    assert_eq!(argv.get(1), Some(&"run"));
+    let config = argv
+        .iter()
+        .position(|a| *a == "--config")
+        .and_then(|i| argv.get(i + 1))
+        .expect("ExecStart names its --config");
+    let conffile = dest_of("config/lab.example.toml");
+    assert!(conffile.starts_with("etc/"), "a conffile lives in /etc");
+    assert_eq!(*config, format!("/{conffile}"));
+    let man = assets
+        .iter()
+        .find(|(_, d)| d.starts_with("usr/share/man/man1"))
+        .expect("man pages");
+    assert!(man.0.starts_with("target/dist/man/"), "{man:?}");
+    assert!(assets
+        .iter()
+        .any(|(s, d)| s.starts_with("udev/") && d.starts_with("usr/lib/udev/rules.d")));
+}
+
+#[test]
+fn sysusers_and_tmpfiles_make_the_units_user_groups_and_state_directory() {
+    let unit = read("systemd/nanoforce.service");
+    let rules = read("udev/99-nanoforce.rules");
+    let sysusers = read("systemd/nanoforce.sysusers");
+    let entries: Vec<Vec<&str>> = sysusers
+        .lines()
+        .filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    let user = values(&unit, "User")[0];
+    assert!(
+        entries.iter().any(|e| e[0] == "u" && e[1] == user),
+        "no `u {user}` in nanoforce.sysusers"
+    );
+    // `u` creates the user's own group; every other group the unit or the rules name
+    // is created (or left as it is when the system has it) and has the user in it.
+    let mut groups: Vec<&str> = values(&unit, "SupplementaryGroups")
+        .iter()
+        .flat_map(|v| v.split_whitespace())
+        .collect();
+    for line in rules.lines().filter(|l| !l.trim_start().starts_with('#')) {
+        if let Some(rest) = line.split("GROUP=\"").nth(1) {
+            groups.extend(rest.split('"').next());
+        }
+    }
+    assert_eq!(values(&unit, "Group"), [user]);
+    for group in groups.iter().filter(|g| **g != user) {
+        assert!(
+            entries.iter().any(|e| e[0] == "g" && e[1] == *group),
+            "nanoforce.sysusers does not create group {group}"
+        );
+        assert!(
+            entries
+                .iter()
+                .any(|e| e[0] == "m" && e[1] == user && e[2] == *group),
+            "nanoforce.sysusers does not put {user} in {group}"
+        );
+    }
+    let state = format!("/var/lib/{}", values(&unit, "StateDirectory")[0]);
+    let mode = values(&unit, "StateDirectoryMode")[0];
+    let tmpfiles = read("systemd/nanoforce.tmpfile");
+    let line = tmpfiles
+        .lines()
+        .find(|l| l.starts_with("d "))
+        .expect("a `d` line in nanoforce.tmpfile");
+    assert_eq!(
+        line.split_whitespace().take(5).collect::<Vec<_>>(),
+        ["d", &state, mode, user, user],
+        "the state directory as the unit makes it"
+    );
 }

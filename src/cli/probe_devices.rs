@@ -20,7 +20,7 @@ Each device the configuration names ([frames], [daq], [haptic]) is opened the wa
 is listed: /dev/video* and /dev/comedi* nodes and whether you may open them, HID \
 devices, whether OpenHaptics' libHD.so loads, and which hardware features this build \
 has. The exit status is non-zero if a configured device cannot be opened.",
-    after_help = "Examples:\n  nanoforce probe-devices --config /etc/nanoforce/lab.toml\n  \
+    after_help = "Examples:\n  nanoforce probe-devices --config /etc/nanoforce/nanoforce.toml\n  \
 nanoforce probe-devices                 # the built-in simulated lab, and what is attached"
 )]
 pub struct ProbeArgs {

@@ -45,7 +45,7 @@ Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.to
 stats.json) in a session folder under the state directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
 nanoforce run --duration-s 30 --stats-json stats.json\n  \
-nanoforce run --config /etc/nanoforce/lab.toml"
+nanoforce run --config /etc/nanoforce/nanoforce.toml"
 )]
 pub struct RunArgs {
     /// Lab configuration (TOML); default: the built-in simulated lab.
