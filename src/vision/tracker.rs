@@ -46,8 +46,8 @@ const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 const COARSE_RETRY: u32 = 2;
 /// ... when the faintest calibrated edge's contrast is below this many gradient noises
 /// of the frame's detection image. Over real backgrounds the frames with noise 30-48
-/// lie at 10-16, the rendered suites' and the adversarial frames' at 22 or more (where
-/// a second search found nothing but more decoys: docs/tracker.md).
+/// lie at 10-16, the adversarial suite's frames (the rendered looks) at 22 or more
+/// (where a second search found nothing but more decoys: docs/tracker.md).
 const RETRY_CONTRAST_NOISES: f64 = 16.0;
 
 /// Per-edge flags.
