@@ -20,8 +20,8 @@ fn suite_seed(default: u64) -> u64 {
 #[test]
 fn suite_of_600_frames_over_real_backgrounds() {
     // 12 sessions x 50 frames over the 12 crops, each session one or two conditions
-    // (scene::real_suite). Held-out seed 71; developed on 5 (SUITE_SEED=n for others,
-    // SUITE_TABLE=1 for every frame).
+    // (scene::real_suite). Held-out seed 71; developed on 5 and 13 (SUITE_SEED=n for
+    // others, SUITE_TABLE=1 for every frame, SUITE_DUMP=dir for the missed frames).
     let crops = rendered::real_crops();
     assert_eq!(crops.len(), 12);
     let seed = suite_seed(71);
@@ -36,31 +36,104 @@ fn suite_of_600_frames_over_real_backgrounds() {
     if std::env::var("SUITE_TABLE").is_ok() {
         println!("{}", table(&t, &e));
     }
+    for (i, (ti, ei)) in t.iter().zip(&e).enumerate() {
+        if ti.detected != ei.detected {
+            let look = &sessions[i / 50].frames[i % 50].look;
+            let real = look.real.expect("a real background");
+            println!(
+                "s{:02} f{:02} in view {} mag {:5.0}: contrast {:+5.1} noise {:4.1} texture {:4.1} \
+                 level {:5.1} gain {:.2} jitter {:.2} needle {} -> conf {:.2} miss {:?}",
+                i / 50,
+                i % 50,
+                ti.detected,
+                ti.magnification,
+                look.probe - look.background,
+                look.noise_sigma,
+                real.texture_sigma,
+                real.level,
+                look.charging_gain,
+                look.jitter_fraction,
+                look.needle.is_some(),
+                ei.confidence,
+                ei.miss
+            );
+        }
+    }
+    if let Ok(dir) = std::env::var("SUITE_DUMP") {
+        // The frames missed or falsely detected, as PNGs named by session and frame.
+        std::fs::create_dir_all(&dir).unwrap_or_else(|err| panic!("SUITE_DUMP={dir}: {err}"));
+        let mut frame = image::GrayImage::new(1, 1);
+        for (i, (ti, ei)) in t.iter().zip(&e).enumerate() {
+            if ti.detected != ei.detected {
+                let spec = &sessions[i / 50].frames[i % 50];
+                scene::render_over_into(spec, &crops, &mut frame);
+                let path = format!("{dir}/s{:02}_f{:02}.png", i / 50, i % 50);
+                frame
+                    .save(&path)
+                    .unwrap_or_else(|err| panic!("{path}: {err}"));
+            }
+        }
+    }
     assert_eq!(t.len(), 600);
-    // Session 10 (strong noise, sigma 30-48, over a bright texture) is the hardest:
-    // seed 71 detects 32 of its 44 probes (frames whose faces Canny breaks up), seed 5
-    // 43 of 44. The rest: 528 of 530 (seed 71), 513 of 518 (seed 5).
-    let others: Vec<usize> = (0..t.len()).filter(|&i| i / 50 != 10).collect();
+    let z: Vec<f64> = t
+        .iter()
+        .zip(&e)
+        .filter(|(t, e)| t.detected && e.detected)
+        .map(|(t, e)| {
+            ((e.angle_deg.unwrap_or(f64::NAN) - t.angle_deg) / e.angle_sigma_deg.unwrap_or(0.0))
+                .abs()
+        })
+        .collect();
+    let mut zs = z.clone();
+    zs.sort_by(f64::total_cmp);
+    let beyond = z.iter().filter(|&&z| z.is_nan() || z > 4.0).count();
+    println!(
+        "|error|/sigma: median {:.3}, beyond 4 sigma {beyond} of {}",
+        zs[zs.len() / 2],
+        z.len()
+    );
+    for (i, (ti, ei)) in t.iter().zip(&e).enumerate() {
+        if let (true, Some(a), Some(sg)) = (ti.detected, ei.angle_deg, ei.angle_sigma_deg) {
+            if ((a - ti.angle_deg) / sg).abs() > 4.0 {
+                let look = &sessions[i / 50].frames[i % 50].look;
+                println!(
+                    "  beyond 4: s{:02} f{:02} err {:+.3} sigma {:.4} noise {:.1} contrast {:+.1} texture {:.1} jitter {:.2}",
+                    i / 50, i % 50, a - ti.angle_deg, sg, look.noise_sigma,
+                    look.probe - look.background,
+                    look.real.map_or(0.0, |r| r.texture_sigma), look.jitter_fraction
+                );
+            }
+        }
+    }
     let pick = |idx: &[usize]| -> (Vec<_>, Vec<_>) {
         (
             idx.iter().map(|&i| t[i].clone()).collect(),
             idx.iter().map(|&i| e[i]).collect(),
         )
     };
-    let (to, eo) = pick(&others);
-    let rest = score(&to, &eo);
-    println!("without session 10: {rest:?}");
-    // Measured on seed 71: 97.6 % (560 of 574), the rest 99.6 %; 1 blank frame with a
-    // needle in view detected (session 7; seed 5: session 5, confidence 0.81); angle
-    // error median 0.0312, p95 0.120, max 0.267 deg; apex median 0.255 px.
-    assert!(sc.detect_rate >= 0.97, "{why}");
-    assert!(rest.detect_rate >= 0.995, "{rest:?}");
+    // Measured on seed 71: 573 of 574 detected (99.8 %; a dark probe at 1103x with a
+    // needle beside it missed); 1 blank frame with a needle in view detected (session
+    // 7, confidence 0.53); angle error median 0.0317, p95 0.128 deg (noise 30-48 frames
+    // included), apex median 0.26 px.
+    assert!(sc.detect_rate >= 0.995, "{why}");
     assert!(sc.false_detections <= 1, "{why}");
-    assert!(sc.angle_err_median_deg <= 0.035, "{why}");
+    assert!(sc.angle_err_median_deg <= 0.033, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
-    assert!(sc.angle_err_max_deg <= 0.3, "{why}");
     assert!(sc.tip_err_median_px <= 0.3, "{why}");
-    // Frames with noise sigma up to 30: the error stays within 0.3 deg.
+    // The reported sigma is honest here too (0.73; 2 of 573 beyond 4 sigma).
+    let median_z = zs[zs.len() / 2];
+    assert!(
+        (0.5..=0.9).contains(&median_z),
+        "median |error|/sigma {median_z}"
+    );
+    assert!(
+        beyond as f64 <= 0.005 * z.len() as f64,
+        "{beyond} of {} beyond 4 sigma",
+        z.len()
+    );
+    // Frames with noise sigma up to 30: the error stays within 0.3 deg (0.225 measured);
+    // beyond, the reported sigma covers it (0.396 deg at noise 30-48,
+    // within 4 of its reported sigmas).
     let quiet: Vec<usize> = (0..t.len())
         .filter(|&i| sessions[i / 50].frames[i % 50].look.noise_sigma <= 30.0)
         .collect();
@@ -68,6 +141,28 @@ fn suite_of_600_frames_over_real_backgrounds() {
     let sq = score(&tq, &eq);
     println!("noise <= 30: {sq:?}");
     assert!(sq.angle_err_max_deg <= 0.3, "{sq:?}");
+}
+
+#[test]
+fn every_probe_of_the_suite_is_visible() {
+    // The visibility rule of docs/renderer.md: the probe's contrast (after charging)
+    // is at least the noise and the background's texture together, per pixel
+    // (|contrast| >= sqrt(noise^2 + texture^2)); a person sees such a probe plainly
+    // over its faces of tens of pixels. A probe 10 levels from its background under
+    // noise 48 (0.2) is what the suite never draws.
+    for seed in [71, 5, 13] {
+        let mut lowest = f64::INFINITY;
+        for session in scene::real_suite(seed, 12, 50, 12) {
+            for spec in session.frames.iter().filter(|s| !s.blank) {
+                let look = &spec.look;
+                let texture = look.real.expect("a real background").texture_sigma;
+                let contrast = (look.probe - look.background).abs() * look.charging_gain;
+                lowest = lowest.min(contrast / look.noise_sigma.hypot(texture));
+            }
+        }
+        println!("seed {seed}: lowest contrast / (noise and texture) {lowest:.2}");
+        assert!(lowest >= 1.0, "seed {seed}: {lowest}");
+    }
 }
 
 /// A session of `n` frames of one setup over a bright, finely textured background, the

@@ -157,10 +157,15 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
     sorted.sort_by(f64::total_cmp);
     let (lo, hi) = (sorted[RING_SAMPLES / 10], sorted[RING_SAMPLES * 9 / 10]);
     let mid = 0.5 * (lo + hi);
-    // The best arc of each polarity (largest sum of levels beyond the mid level; the
-    // ring is circular, so it is scanned twice round).
+    // The pyramid opens by less than ARC_DEG.1 (150 deg): it is the minority of the
+    // ring, brighter or darker than the rest. A textured ground has arcs of either
+    // polarity; the background's own arc is the majority. The best arc of the
+    // pyramid's polarity (largest sum of levels beyond the mid level; the ring is
+    // circular, so it is scanned twice round).
+    let above = ring.iter().filter(|&&v| v > mid).count();
+    let pyramid = if 2 * above <= RING_SAMPLES { 1.0 } else { -1.0 };
     let mut best: Option<(f64, usize, usize, f64)> = None;
-    for polarity in [1.0, -1.0] {
+    for polarity in [pyramid] {
         let (mut sum, mut start) = (0.0, 0);
         for i in 0..2 * RING_SAMPLES {
             let v = polarity * (ring[i % RING_SAMPLES] - mid);
@@ -177,9 +182,6 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
             {
                 best = Some((sum, start, i, polarity));
             }
-        }
-        if best.is_some() {
-            break;
         }
     }
     let Some((_, start, end, polarity)) = best else {

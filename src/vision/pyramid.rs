@@ -66,7 +66,11 @@ pub fn binning_factor(width: u32) -> u32 {
 impl Pyramid {
     /// Bins `frame` and computes its gradient. Allocates only when the size changes.
     pub fn build(&mut self, frame: &GrayImage) {
-        let factor = binning_factor(frame.width());
+        self.build_binned(frame, binning_factor(frame.width()));
+    }
+
+    /// As [`Pyramid::build`], binned `factor x factor`.
+    pub fn build_binned(&mut self, frame: &GrayImage, factor: u32) {
         let width = (frame.width() / factor) as usize;
         let height = (frame.height() / factor) as usize;
         self.factor = factor;
