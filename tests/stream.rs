@@ -19,6 +19,7 @@ use nanoforce::daemon::stats::RunStats;
 use nanoforce::daemon::stream::{self, StreamShared};
 use nanoforce::daemon::{lab, Daemon, ExitReason, PublishedEstimate, RunOptions};
 use nanoforce::hw::Clock;
+use nanoforce::session::utc::UtcAnchor;
 use serde_json::Value;
 
 /// One simulated lab at a time.
@@ -395,7 +396,8 @@ fn the_documented_python_reader_reads_the_stream() {
     };
     let shared = Arc::new(StreamShared::default());
     let clock = Clock::start();
-    let mut started = stream::start(&config, shared.clone(), clock, PixelOrigin::Centre).unwrap();
+    let anchor = UtcAnchor::measure(&clock);
+    let mut started = stream::start(&config, shared.clone(), anchor, PixelOrigin::Centre).unwrap();
     for seq in 1..=COUNT {
         let detected = !seq.is_multiple_of(4);
         let estimate = PublishedEstimate {

@@ -483,10 +483,12 @@ fn spawn_threads(
     let (events_tx, events_rx) = mpsc::channel();
     // The stream and the monitor first: they only read, and a socket refused or a port
     // in use stops the start right here (a stream not yet joined stops as it drops).
+    // t = 0 in UTC, one anchor for the session's CSVs and the stream.
+    let anchor = UtcAnchor::measure(&clock);
     let (stream, estimate_tap, haptic_tap) = match options.stream.udp {
         Some(addr) => {
             let shared = Arc::new(StreamShared::default());
-            let started = stream::start(&options.stream, shared, clock, options.pixel_origin)
+            let started = stream::start(&options.stream, shared, anchor, options.pixel_origin)
                 .with_context(|| format!("starting the data stream to {addr} ([stream] udp)"))?;
             (
                 Some(started.handle),
@@ -513,7 +515,6 @@ fn spawn_threads(
         _ => (None, None),
     };
 
-    let anchor = UtcAnchor::measure(&clock);
     let (frame_tap, frame_recorder) = match &options.session_dir {
         Some(dir) => {
             let writer = FrameWriter {

@@ -2,42 +2,13 @@
 //! names and units are an interface (docs/stream.md); a value the daemon does not know
 //! (no detection, no stylus reading) is `null`, never a made-up number.
 use std::fmt;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::{Serialize, Serializer};
 
 use crate::config::PixelOrigin;
 use crate::daemon::haptic_loop::TickRecord;
 use crate::daemon::PublishedEstimate;
-use crate::hw::Clock;
-
-/// The wall-clock time of the daemon clock's zero, taken once when the stream starts:
-/// every datagram's `utc` is this plus its `t_s`, so the stream stays on one timebase
-/// even if the system clock is stepped during the run.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct UtcAnchor {
-    /// Seconds since 1970-01-01T00:00:00Z at t_s = 0.
-    pub unix_s_at_zero: f64,
-}
-
-impl UtcAnchor {
-    /// Reads the system clock between two reads of `clock` and takes the midpoint.
-    pub fn take(clock: &Clock) -> UtcAnchor {
-        let before_s = clock.now_s();
-        let wall_s = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0.0, |d| d.as_secs_f64());
-        let after_s = clock.now_s();
-        UtcAnchor {
-            unix_s_at_zero: wall_s - 0.5 * (before_s + after_s),
-        }
-    }
-
-    /// Seconds since 1970-01-01T00:00:00Z at `t_s` on the daemon clock.
-    pub fn unix_s(&self, t_s: f64) -> f64 {
-        self.unix_s_at_zero + t_s
-    }
-}
+use crate::session::utc::{civil_from_days, UtcAnchor};
 
 /// A Unix time printed as RFC 3339 UTC with microseconds: `2026-12-03T00:01:10.123456Z`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,20 +39,6 @@ impl Serialize for Utc {
             serializer.serialize_none()
         }
     }
-}
-
-/// (year, month, day) of a count of days since 1970-01-01, proleptic Gregorian
-/// (Howard Hinnant's civil_from_days).
-fn civil_from_days(days: i64) -> (i64, i64, i64) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    (yoe + era * 400 + i64::from(month <= 2), month, day)
 }
 
 /// A number, or None (JSON null) when it is not finite.
@@ -127,6 +84,7 @@ struct HapticDatagram {
 /// How datagrams are stamped and where their pixels count from.
 #[derive(Debug, Clone, Copy)]
 pub struct Format {
+    /// The session's anchor (session.json), so the stream and the CSVs share one UTC.
     pub anchor: UtcAnchor,
     /// `tracker.pixel_origin`, as in estimates.csv.
     pub pixel_origin: PixelOrigin,
@@ -136,7 +94,7 @@ impl Format {
     /// Writes the datagram of a published estimate into `out` (cleared first).
     pub fn estimate(&self, out: &mut Vec<u8>, e: &PublishedEstimate) {
         let tip = self.pixel_origin.output(e.apex_px).map(known);
-        let unix_s = self.anchor.unix_s(e.frame_time_s);
+        let unix_s = self.anchor.unix_ns(e.frame_time_s) as f64 * 1e-9;
         let datagram = EstimateDatagram {
             kind: "estimate",
             seq: e.seq,
@@ -157,7 +115,7 @@ impl Format {
 
     /// Writes the datagram of one haptic tick, the `seq`-th sent, into `out`.
     pub fn haptic(&self, out: &mut Vec<u8>, seq: u64, r: &TickRecord) {
-        let unix_s = self.anchor.unix_s(r.t_s);
+        let unix_s = self.anchor.unix_ns(r.t_s) as f64 * 1e-9;
         let datagram = HapticDatagram {
             kind: "haptic",
             seq,
@@ -208,17 +166,6 @@ mod tests {
         );
     }
 
-    #[test]
-    fn anchor_follows_the_system_clock() {
-        let clock = Clock::start();
-        let anchor = UtcAnchor::take(&clock);
-        let wall_s = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .unwrap()
-            .as_secs_f64();
-        assert!((anchor.unix_s(clock.now_s()) - wall_s).abs() < 0.01);
-    }
-
     fn json(bytes: &[u8]) -> serde_json::Value {
         serde_json::from_slice(bytes).unwrap()
     }
@@ -227,7 +174,8 @@ mod tests {
     fn estimate_fields_and_nulls() {
         let format = Format {
             anchor: UtcAnchor {
-                unix_s_at_zero: 1_796_256_000.0,
+                t0_unix_ns: 1_796_256_000_000_000_000,
+                t0_monotonic_ns: 0,
             },
             pixel_origin: PixelOrigin::Corner,
         };
@@ -273,7 +221,8 @@ mod tests {
     fn haptic_fields() {
         let format = Format {
             anchor: UtcAnchor {
-                unix_s_at_zero: 0.0,
+                t0_unix_ns: 0,
+                t0_monotonic_ns: 0,
             },
             pixel_origin: PixelOrigin::Centre,
         };

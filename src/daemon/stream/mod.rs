@@ -21,11 +21,11 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 pub use self::config::StreamConfig;
-use self::datagram::{Format, UtcAnchor};
+use self::datagram::Format;
 use super::haptic_loop::TickRecord;
 use super::PublishedEstimate;
 use crate::config::PixelOrigin;
-use crate::hw::Clock;
+use crate::session::utc::UtcAnchor;
 
 /// Records the rings hold: about 4 s of estimates at 60 frames/s, 1 s of haptic
 /// datagrams at 1 kHz; the thread drains them every [`DRAIN_EVERY`].
@@ -165,7 +165,7 @@ pub struct Started {
 pub fn start(
     config: &StreamConfig,
     shared: Arc<StreamShared>,
-    clock: Clock,
+    anchor: UtcAnchor,
     pixel_origin: PixelOrigin,
 ) -> io::Result<Started> {
     let Some(target) = config.udp else {
@@ -184,7 +184,7 @@ pub fn start(
         estimates: est_rx,
         haptic: haptic_rx,
         format: Format {
-            anchor: UtcAnchor::take(&clock),
+            anchor,
             pixel_origin,
         },
         shared: shared.clone(),
@@ -366,6 +366,7 @@ impl ErrorLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hw::Clock;
 
     #[test]
     fn haptic_tap_keeps_its_rate_and_never_bursts() {
@@ -429,7 +430,8 @@ mod tests {
         };
         let shared = Arc::new(StreamShared::default());
         let clock = Clock::start();
-        let mut started = start(&config, shared.clone(), clock, PixelOrigin::Centre).unwrap();
+        let anchor = UtcAnchor::measure(&clock);
+        let mut started = start(&config, shared.clone(), anchor, PixelOrigin::Centre).unwrap();
         for seq in 1..=20 {
             let estimate = PublishedEstimate {
                 seq,
