@@ -27,7 +27,7 @@ use std::time::Instant;
 
 use image::GrayImage;
 use nanoforce::report::plot::{self, Panel, Series};
-use nanoforce::scene::adversarial::{Adversary, Decoy};
+use nanoforce::scene::adversarial::{self, Adversary, Decoy};
 use nanoforce::scene::rng::{sub_seed, Rng};
 use nanoforce::scene::{self, Session};
 use nanoforce::session::score::percentile;
@@ -103,30 +103,6 @@ fn rendered_suite(seed: u64, tally: &mut Tally) {
     }
 }
 
-/// A random sub-window of a real SEM crop (half to all of it, 4:3), flipped at random,
-/// resized to the session's frame size: the adversarial suite's real-SEM frames.
-fn real_frame(crops: &[GrayImage], width: u32, height: u32, rng: &mut Rng) -> GrayImage {
-    let crop = &crops[rng.int(0, crops.len() as u32 - 1) as usize];
-    let (cw, ch) = crop.dimensions();
-    let share = rng.uniform(0.5, 1.0);
-    let w = ((cw as f64 * share) as u32).min(ch * 4 / 3).max(64);
-    let h = (w * 3 / 4).min(ch);
-    let (x, y) = (rng.int(0, cw - w), rng.int(0, ch - h));
-    let mut window = image::imageops::crop_imm(crop, x, y, w, h).to_image();
-    if rng.chance(0.5) {
-        image::imageops::flip_horizontal_in_place(&mut window);
-    }
-    if rng.chance(0.5) {
-        image::imageops::flip_vertical_in_place(&mut window);
-    }
-    image::imageops::resize(
-        &window,
-        width,
-        height,
-        image::imageops::FilterType::Triangle,
-    )
-}
-
 /// Renders and tracks the adversarial suite of `seed`.
 fn adversarial_suite(seed: u64, crops: &[GrayImage], tally: &mut Tally) {
     let sessions: Vec<Session> = scene::suite(seed, ADVERSARIAL_SESSIONS, 1);
@@ -144,7 +120,7 @@ fn adversarial_suite(seed: u64, crops: &[GrayImage], tally: &mut Tally) {
         let mut rng = Rng::new(sub_seed(seed, 7000 + i as u64));
         let (w, h) = (session.reference.width, session.reference.height);
         for _ in 0..FRAMES_PER_KIND {
-            let real = real_frame(crops, w, h, &mut rng);
+            let real = adversarial::real_window(crops, w, h, &mut rng);
             tally.adversarial(&tracker.track(&real));
         }
     }

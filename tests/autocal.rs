@@ -175,7 +175,7 @@ fn auto_calibration_over_real_backgrounds_reads_and_tracks_as_hand_clicks_do() {
     // Measured: 10 of 12 references calibrate, of either polarity, within 0.004-0.094
     // deg of the hand clicks (each within 3 standard errors of a difference); the
     // tracked frames score as with hand clicks (median 0.0265 against 0.0252 deg,
-    // p95 0.260 against 0.300). Not yet: session 1 (a dark probe over bright texture:
+    // p95 0.260 against 0.300). The two that fail: session 1 (a dark probe over bright texture:
     // its beam edge is not traced) and session 8 (noise and jitter: the faces are
     // taken the wrong way round); both fail with the reason, never a wrong block.
     assert!(failed.len() <= 2, "sessions {failed:?} not calibrated");

@@ -15,7 +15,7 @@ mod tracker_support;
 use std::collections::BTreeMap;
 
 use image::GrayImage;
-use nanoforce::scene::adversarial::{Adversary, Decoy};
+use nanoforce::scene::adversarial::{self, Adversary, Decoy};
 use nanoforce::scene::rng::{sub_seed, Rng};
 use nanoforce::scene::{self, Session};
 use nanoforce::vision::{Estimate, Tracker};
@@ -24,31 +24,6 @@ use tracker_support::rendered;
 /// Sessions of the suite the frames are made for, and frames per session and kind.
 const SESSIONS: usize = 6;
 const FRAMES_PER_KIND: usize = 30;
-
-/// A random sub-window (half to all of a crop, 4:3), flipped at random, resized to the
-/// session's frame size.
-fn real_frame(crops: &[GrayImage], width: u32, height: u32, rng: &mut Rng) -> GrayImage {
-    let crop = &crops[rng.int(0, crops.len() as u32 - 1) as usize];
-    let (cw, ch) = crop.dimensions();
-    let share = rng.uniform(0.5, 1.0);
-    let w = ((cw as f64 * share) as u32).min(ch * 4 / 3).max(64);
-    let h = (w * 3 / 4).min(ch);
-    let x = rng.int(0, cw - w);
-    let y = rng.int(0, ch - h);
-    let mut window = image::imageops::crop_imm(crop, x, y, w, h).to_image();
-    if rng.chance(0.5) {
-        image::imageops::flip_horizontal_in_place(&mut window);
-    }
-    if rng.chance(0.5) {
-        image::imageops::flip_vertical_in_place(&mut window);
-    }
-    image::imageops::resize(
-        &window,
-        width,
-        height,
-        image::imageops::FilterType::Triangle,
-    )
-}
 
 /// Per kind: frames, detections (with their description), largest confidence, and the
 /// count of each miss reason.
@@ -98,7 +73,7 @@ fn run(seed: u64) -> BTreeMap<&'static str, Tally> {
         let mut rng = Rng::new(sub_seed(seed, 7000 + i as u64));
         let (w, h) = (session.reference.width, session.reference.height);
         for k in 0..FRAMES_PER_KIND {
-            let real = real_frame(&crops, w, h, &mut rng);
+            let real = adversarial::real_window(&crops, w, h, &mut rng);
             let e = tracker.track(&real);
             tallies
                 .entry("real-sem")

@@ -303,3 +303,29 @@ fn other_geometry(p: &ProbeGeometry, rng: &mut Rng) -> ProbeGeometry {
     }
     q
 }
+
+/// A random sub-window of a real SEM frame from `crops` (half to all of one, 4:3),
+/// flipped at random, resized to `width` x `height`: the adversarial suite's real-SEM
+/// frames, which show no probe at all.
+pub fn real_window(crops: &[GrayImage], width: u32, height: u32, rng: &mut Rng) -> GrayImage {
+    let crop = &crops[rng.int(0, crops.len() as u32 - 1) as usize];
+    let (cw, ch) = crop.dimensions();
+    let share = rng.uniform(0.5, 1.0);
+    let w = ((cw as f64 * share) as u32).min(ch * 4 / 3).max(64);
+    let h = (w * 3 / 4).min(ch);
+    let x = rng.int(0, cw - w);
+    let y = rng.int(0, ch - h);
+    let mut window = image::imageops::crop_imm(crop, x, y, w, h).to_image();
+    if rng.chance(0.5) {
+        image::imageops::flip_horizontal_in_place(&mut window);
+    }
+    if rng.chance(0.5) {
+        image::imageops::flip_vertical_in_place(&mut window);
+    }
+    image::imageops::resize(
+        &window,
+        width,
+        height,
+        image::imageops::FilterType::Triangle,
+    )
+}
