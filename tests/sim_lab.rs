@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use nanoforce::cli::run::SIM_CONFIG;
 use nanoforce::config::Config;
+use nanoforce::daemon::stats::RunStats;
 use nanoforce::daemon::{lab, Daemon, ExitReason, RunOptions};
 use nanoforce::hw::Clock;
 
@@ -44,18 +45,7 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
     let s = outcome.stats;
     eprintln!("{}", serde_json::to_string_pretty(&s).unwrap());
 
-    let peak = s.force.true_peak_nn.unwrap();
-    assert!(peak > 2500.0, "the operator pressed to ~3 uN: peak {peak}");
-    let rms = s.force.rms_error_nn.unwrap();
-    let max = s.force.max_error_nn.unwrap();
-    assert!(
-        rms <= 0.02 * peak,
-        "force rms error {rms} nN > 2 % of {peak}"
-    );
-    assert!(
-        max <= 0.05 * peak,
-        "force max error {max} nN > 5 % of {peak}"
-    );
+    assert_force_targets(&s, 2500.0, "~3 uN");
 
     let f = &s.frames;
     assert!(f.received >= 700, "60 Hz for 12 s: {f:?}");
@@ -100,6 +90,26 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
     );
 }
 
+/// The press reached (true peak above `min_peak_nn`) and the force targets met: RMS
+/// error <= 2 % and max error <= 5 % of the true peak.
+fn assert_force_targets(s: &RunStats, min_peak_nn: f64, press: &str) {
+    let peak = s.force.true_peak_nn.unwrap();
+    assert!(
+        peak > min_peak_nn,
+        "the operator pressed to {press}: peak {peak}"
+    );
+    let rms = s.force.rms_error_nn.unwrap();
+    let max = s.force.max_error_nn.unwrap();
+    assert!(
+        rms <= 0.02 * peak,
+        "force rms error {rms} nN > 2 % of {peak}"
+    );
+    assert!(
+        max <= 0.05 * peak,
+        "force max error {max} nN > 5 % of {peak}"
+    );
+}
+
 /// The shipped lab with the SEM at `rate_hz` and `delay_ms`, a short task: contact 5 um
 /// away, a press to 2 uN, no magnification change.
 fn short_lab(rate_hz: f64, delay_ms: f64) -> Config {
@@ -114,7 +124,7 @@ fn short_lab(rate_hz: f64, delay_ms: f64) -> Config {
 }
 
 /// Runs `config` for `duration_s` and returns its stats.
-fn run(config: &Config, duration_s: f64) -> nanoforce::daemon::stats::RunStats {
+fn run(config: &Config, duration_s: f64) -> RunStats {
     let clock = Clock::start();
     let devices = lab::open(config, clock).unwrap();
     let options = RunOptions {
@@ -139,18 +149,7 @@ fn frame_rate_case(rate_hz: f64, delay_ms: f64) {
         "{rate_hz} Hz, {delay_ms} ms: {}",
         serde_json::to_string(&s).unwrap()
     );
-    let peak = s.force.true_peak_nn.unwrap();
-    assert!(peak > 1700.0, "the operator pressed to ~2 uN: peak {peak}");
-    let rms = s.force.rms_error_nn.unwrap();
-    let max = s.force.max_error_nn.unwrap();
-    assert!(
-        rms <= 0.02 * peak,
-        "force rms error {rms} nN > 2 % of {peak}"
-    );
-    assert!(
-        max <= 0.05 * peak,
-        "force max error {max} nN > 5 % of {peak}"
-    );
+    assert_force_targets(&s, 1700.0, "~2 uN");
     assert_eq!(
         s.safety.stale_events, 0,
         "frames stream steadily: {:?}",
