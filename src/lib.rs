@@ -17,6 +17,7 @@
 //! - [`report`]: the HTML report about a session, with its plots.
 //! - [`config`]: TOML files -> validated [`config::Config`].
 //! - [`cli`]: the command-line front end over the library.
+pub mod checks;
 pub mod cli;
 pub mod config;
 pub mod control;

@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use super::daq::config::{ComediConfig, RawDaq};
 use super::frames::config::{PipeConfig, RawFrames, V4l2Config};
 use super::haptic::config::{HidConfig, OpenHapticsConfig, RawHaptic};
-use crate::config::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, Range};
 
 /// One device section, as written in the file.
 pub(crate) type RawDevice = toml::Table;

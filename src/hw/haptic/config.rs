@@ -6,7 +6,7 @@
 //! `[haptic.force]`.
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, List, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 
 /// The stylus travel a HID axis's raw span maps to: a PHANToM's workspace is 70 to
 /// 380 mm across.
