@@ -342,6 +342,25 @@ impl Checker<'_> {
     }
 }
 
+/// Reading a lab file of one cantilever and the sections a test gives, for the tests of
+/// the sections other modules own (`[frames]`, `[daq]`, `[haptic]`).
+#[cfg(test)]
+pub(crate) mod testing {
+    use std::path::Path;
+
+    use super::{Config, ConfigError};
+
+    const BASE: &str = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n";
+
+    pub(crate) fn parse(sections: &str) -> Result<Config, ConfigError> {
+        Config::from_toml_str(&format!("{BASE}{sections}"), Path::new("lab.toml"))
+    }
+
+    pub(crate) fn error_of(sections: &str) -> String {
+        parse(sections).unwrap_err().to_string()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -243,7 +243,7 @@ impl RawAxis {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::DaqBackend;
     use crate::hw::daq::config::*;
 

@@ -222,7 +222,7 @@ impl RawFrames {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::FramesBackend;
     use crate::hw::frames::config::*;
 

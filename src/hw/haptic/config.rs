@@ -249,7 +249,7 @@ impl RawHidForce {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::HapticBackend;
     use crate::hw::haptic::config::*;
 
