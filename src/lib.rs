@@ -24,7 +24,6 @@ pub mod control;
 pub mod daemon;
 pub mod hw;
 pub mod model;
-pub mod monitor;
 pub mod report;
 pub mod scene;
 pub mod session;

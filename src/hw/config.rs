@@ -3,7 +3,7 @@
 //! configuration that names no hardware never touches any.
 //!
 //! Each section is read as a TOML table here and then into the backend's own raw struct
-//! (`deny_unknown_fields`), so `src/config.rs` needs to know nothing about backends.
+//! (`deny_unknown_fields`), so `src/config/mod.rs` needs to know nothing about backends.
 //! Keys are validated in every build; whether the backend's cargo feature is compiled
 //! in is checked when the devices are opened ([`super::open::check_compiled`]), so a
 //! configuration can be checked anywhere.

@@ -11,15 +11,21 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+pub mod daemon;
+pub mod monitor;
+pub mod stream;
+
+use self::daemon::RawDaemon;
+pub use self::daemon::{DaemonConfig, LoopOptions};
+pub use self::monitor::MonitorConfig;
+use self::monitor::RawMonitor;
+use self::stream::RawStream;
+pub use self::stream::StreamConfig;
 pub(crate) use crate::checks::Checker;
 pub use crate::checks::{ConfigError, Number, Range, Zero};
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
-use crate::daemon::config::{DaemonConfig, RawDaemon};
-use crate::daemon::stream::config::RawStream;
-use crate::daemon::stream::StreamConfig;
 use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
-use crate::monitor::config::{MonitorConfig, RawMonitor};
 use crate::sim::config::{RawSim, SimConfig};
 pub use crate::vision::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
