@@ -1,6 +1,6 @@
 //! The validation toolkit every configuration section is checked with: the error a
 //! configuration file gets ([`ConfigError`], naming file, key and value), the accepted
-//! range of a number ([`Range`]), fixed-size TOML lists ([`List`]) and the [`Checker`]
+//! range of a number ([`Range`]), fixed-size TOML lists (`List`) and the `Checker`
 //! that knows which file it checks. It imports nothing of the crate, so each module can
 //! validate its own section without reaching up into `config`.
 use std::fmt;
@@ -38,7 +38,7 @@ pub enum ConfigError {
 }
 
 /// The accepted values of a number a lab types, with its unit: the one rule every
-/// numeric key is checked against ([`Checker::number`]), so every refusal reads the same
+/// numeric key is checked against (`Checker::number`), so every refusal reads the same
 /// (`probe.toml: cantilever.length_um = 1e308 is out of range: accepted 10 to 1000 um`)
 /// and `config/` documents each key's range in the same words.
 #[derive(Debug, Clone, Copy, PartialEq)]
