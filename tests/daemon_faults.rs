@@ -470,7 +470,7 @@ fn a_panic_in_any_thread_stops_with_outputs_at_zero() {
             },
             session_dir: Some(session.path().to_path_buf()),
             // Recording thumbnails runs the monitor thread.
-            monitor: Some(nanoforce::monitor::MonitorConfig::default()),
+            monitor: Some(nanoforce::config::MonitorConfig::default()),
             inject: Some(PanicInjection::new(thread, Duration::from_millis(400)).unwrap()),
             ..RunOptions::default()
         };

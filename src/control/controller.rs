@@ -10,14 +10,8 @@ use super::gate::{Candidate, Gate, GateCounters, Judgement};
 use super::ramp::Ramp;
 use super::safety::{Facts, PressBlock, Safety, SafetyCounters, SafetyState, Verdict};
 use super::timing::{FrameTiming, TravelLog};
+pub use crate::hw::haptic::HapticSample;
 use crate::model::ModelTable;
-
-/// The stylus as read this tick (haptic frame).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HapticSample {
-    pub position_mm: Vector3<f64>,
-    pub velocity_mm_s: Vector3<f64>,
-}
 
 /// The newest force estimate published by the tracker.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

@@ -9,7 +9,7 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, List, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 use crate::model::Cantilever;
 
 // The accepted ranges, documented with the same words in config/sim.toml.

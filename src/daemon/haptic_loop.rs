@@ -17,6 +17,7 @@ use super::rt;
 use super::stats::Histogram;
 use super::stream::HapticTap;
 use super::PublishedEstimate;
+pub use crate::config::LoopOptions;
 use crate::control::{
     Controller, GateCounters, PressBlock, SafetyCounters, SafetyState, TeleopGains, TickInput,
 };
@@ -24,33 +25,6 @@ use crate::hw::clock::monotonic_ns;
 use crate::hw::daq::RateOutput;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
-
-/// Loop settings that are not teleoperation gains.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LoopOptions {
-    /// SCHED_FIFO priority to request (None: leave the scheduler alone).
-    pub rt_priority: Option<i32>,
-    pub lock_memory: bool,
-    /// Busy-wait this long before each deadline for a precise wake-up.
-    pub spin_us: u64,
-    /// PM QoS limit on CPU wake-up latency held while the loop runs (None: leave the
-    /// system's setting).
-    pub cpu_latency_us: Option<u32>,
-    /// Record every n-th tick in the telemetry.
-    pub telemetry_every: u32,
-}
-
-impl Default for LoopOptions {
-    fn default() -> Self {
-        LoopOptions {
-            rt_priority: Some(80),
-            lock_memory: true,
-            spin_us: 60,
-            cpu_latency_us: Some(0),
-            telemetry_every: 10,
-        }
-    }
-}
 
 /// One telemetry row of the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]

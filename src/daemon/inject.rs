@@ -14,8 +14,8 @@ use nalgebra::Vector3;
 
 use super::snapshot::EdgeSegments;
 use super::{Estimator, FrameEstimate};
-use crate::control::HapticSample;
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
+use crate::hw::haptic::HapticSample;
 use crate::hw::haptic::{HapticDevice, HapticError};
 
 /// The environment variable `nanoforce run` reads.

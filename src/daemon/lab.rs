@@ -1,5 +1,5 @@
 //! Opening the lab a configuration describes: each device from its backend (real ones
-//! through [`crate::hw::open`], `"sim"` ones as the simulated lab), and the tracker
+//! through [`crate::hw::open`], `"sim"` ones from [`crate::sim::lab`]), and the tracker
 //! calibrated on its reference frame. With the simulated SEM the reference frame and
 //! the clicks come from the simulator; otherwise from `[tracker.calibration]`.
 use anyhow::Context;
@@ -9,16 +9,13 @@ use super::snapshot::EdgeSegments;
 use super::{Devices, Estimator, FrameEstimate};
 use crate::config::{CalibrationConfig, Config};
 use crate::hw::config::FramesBackend;
-use crate::hw::daq::sim::SimStage;
 use crate::hw::daq::RateOutput;
-use crate::hw::frames::sim::SimSem;
 use crate::hw::frames::FrameSource;
-use crate::hw::haptic::sim::SimHaptic;
 use crate::hw::open as hw_open;
 use crate::hw::Clock;
 use crate::session::frames::load_gray;
-use crate::sim::contact::Contact;
-use crate::sim::operator::{HandModel, Operator};
+use crate::sim::frames::SimSem;
+use crate::sim::lab as sim_lab;
 use crate::sim::sem::SemScene;
 use crate::vision::{Calibration, Estimate, Tracker};
 
@@ -68,12 +65,11 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
         FramesBackend::Sim => None,
         _ => Some(tracker_from_config(config)?),
     };
-    let teleop = &config.teleop;
     let (stage, snapshots): (Box<dyn RateOutput>, _) =
         match hw_open::daq(&devices.daq).context("opening the DAQ ([daq])")? {
             Some(daq) => (daq, None),
             None => {
-                let (stage, snapshots) = SimStage::new(config.sim.stage.clone());
+                let (stage, snapshots) = sim_lab::stage(&config.sim);
                 (Box::new(stage), Some(snapshots))
             }
         };
@@ -92,22 +88,11 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
                 (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
             }
         };
-    let haptic = match hw_open::haptic(&devices.haptic)
-        .context("opening the haptic device ([haptic])")?
-    {
-        Some(haptic) => haptic,
-        None => {
-            let hand = HandModel {
-                press_direction_haptic: teleop.haptic_from_stage() * teleop.press_direction_stage,
-                spring_n_per_mm: teleop.spring_n_per_mm,
-                force_scale_n_per_nn: teleop.force_scale_n_per_nn,
-            };
-            Box::new(SimHaptic::new(Operator::new(
-                config.sim.operator.clone(),
-                hand,
-            )))
-        }
-    };
+    let haptic =
+        match hw_open::haptic(&devices.haptic).context("opening the haptic device ([haptic])")? {
+            Some(haptic) => haptic,
+            None => Box::new(sim_lab::haptic(&config.sim, &config.teleop)),
+        };
     if !haptic.has_force_feedback() {
         tracing::warn!("{}: position only, no force feedback", haptic.name());
     }
@@ -127,13 +112,7 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
 
 /// The simulated SEM of `config`'s `[sim]` sections.
 fn sim_scene(config: &Config) -> SemScene {
-    let teleop = &config.teleop;
-    let contact = Contact {
-        sample: config.sim.sample.clone(),
-        cantilever: config.cantilever,
-        press_direction: teleop.press_direction_stage,
-    };
-    SemScene::new(config.sim.sem.clone(), contact, teleop.pressing_force_sign)
+    sim_lab::sem_scene(&config.sim, config.cantilever, &config.teleop)
 }
 
 /// The tracker calibrated on the simulated SEM's reference frame and clicks.

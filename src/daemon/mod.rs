@@ -10,7 +10,8 @@
 //! - `frame-recorder`: writes the frames the tracker saw into the session's
 //!   `frames.nfrm` ([`frame_record`]);
 //! - `monitor` (when `[monitor]` asks for it): the live web page and the recorded
-//!   thumbnails, drawn from [`snapshot`]s the tracker hands over without waiting;
+//!   thumbnails ([`monitor`]), drawn from [`snapshot`]s the tracker hands over without
+//!   waiting;
 //! - the supervisor, on a small tokio runtime: signals (SIGHUP reloads the gains;
 //!   SIGINT, SIGTERM, SIGQUIT, SIGABRT, SIGUSR1/2, SIGALRM, SIGXCPU stop it), systemd
 //!   notifications and watchdog, the status line. Any thread that dies (a panic, in
@@ -23,12 +24,12 @@
 //! The blocking loops are plain threads rather than async tasks: a capture call, a
 //! tracker pass or a 1 kHz deadline must never wait on an executor, and async is only
 //! the wiring around them.
-pub mod config;
 pub mod frame_record;
 pub mod haptic_loop;
 pub mod inject;
 pub mod instance;
 pub mod lab;
+pub mod monitor;
 pub mod notify;
 pub mod pipeline;
 pub mod rt;

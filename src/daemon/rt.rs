@@ -1,12 +1,13 @@
 //! Real-time helpers for the haptic loop thread: SCHED_FIFO priority, locked memory, a
-//! limit on CPU wake-up latency, and sleeping until an absolute CLOCK_MONOTONIC deadline.
+//! limit on CPU wake-up latency, and sleeping until an absolute CLOCK_MONOTONIC deadline
+//! ([`sleep_until`], kept with the clock in `hw`, where the simulated SEM sleeps too).
 //! Each may be refused (no CAP_SYS_NICE / RLIMIT_RTPRIO, RLIMIT_MEMLOCK, no access to
 //! /dev/cpu_dma_latency): the caller logs a warning and goes on.
 use std::fs::File;
 use std::io::{self, Write};
 use std::path::Path;
 
-use crate::hw::clock::monotonic_ns;
+pub use crate::hw::clock::sleep_until;
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1..=99).
 pub fn set_realtime_priority(priority: i32) -> io::Result<()> {
@@ -53,52 +54,9 @@ pub fn request_cpu_latency(device: &Path, max_us: u32) -> io::Result<CpuLatencyR
     Ok(CpuLatencyRequest { _file: file })
 }
 
-/// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns`, then spins the last
-/// `spin_ns` for a precise wake-up (the kernel's timer slack and scheduling latency
-/// are tens of microseconds on a loaded machine without SCHED_FIFO).
-pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
-    let sleep_to = deadline_ns.saturating_sub(spin_ns);
-    if monotonic_ns() < sleep_to {
-        let ts = libc::timespec {
-            tv_sec: (sleep_to / 1_000_000_000) as libc::time_t,
-            tv_nsec: (sleep_to % 1_000_000_000) as libc::c_long,
-        };
-        loop {
-            // SAFETY: absolute sleep on CLOCK_MONOTONIC; `ts` outlives the call and the
-            // remainder pointer may be null with TIMER_ABSTIME.
-            let rc = unsafe {
-                libc::clock_nanosleep(
-                    libc::CLOCK_MONOTONIC,
-                    libc::TIMER_ABSTIME,
-                    &ts,
-                    std::ptr::null_mut(),
-                )
-            };
-            if rc != libc::EINTR {
-                break;
-            }
-        }
-    }
-    while monotonic_ns() < deadline_ns {
-        std::hint::spin_loop();
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn wakes_at_the_deadline_not_before() {
-        for _ in 0..20 {
-            let deadline = monotonic_ns() + 1_000_000;
-            sleep_until(deadline, 50_000);
-            let late = monotonic_ns() - deadline;
-            assert!(late < 20_000_000, "woke {late} ns late");
-        }
-        let past = monotonic_ns() - 1_000_000;
-        sleep_until(past, 0);
-    }
 
     #[test]
     fn a_latency_request_writes_the_kernel_s_binary_value_and_holds_the_file() {

@@ -13,6 +13,7 @@ use tokio::sync::mpsc as async_mpsc;
 use super::frame_record::{FrameRecorder, FrameWriter, FRAMES_SHARE};
 use super::haptic_loop::{GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::inject::{PanicInjection, PanickingEstimator, PanickingFrames, PanickingHaptic};
+use super::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
 use super::snapshot::snapshot_channel;
@@ -30,7 +31,6 @@ use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
-use crate::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
 use crate::session::utc::UtcAnchor;
 
 /// The opened devices and the tracker, ready to run.

@@ -3,16 +3,16 @@
 //! configuration that names no hardware never touches any.
 //!
 //! Each section is read as a TOML table here and then into the backend's own raw struct
-//! (`deny_unknown_fields`), so `src/config.rs` needs to know nothing about backends.
+//! (`deny_unknown_fields`), so `src/config/mod.rs` needs to know nothing about backends.
 //! Keys are validated in every build; whether the backend's cargo feature is compiled
-//! in is checked when the device is opened ([`crate::daemon::lab::open`]), so a
+//! in is checked when the devices are opened ([`super::open::check_compiled`]), so a
 //! configuration can be checked anywhere.
 use serde::de::DeserializeOwned;
 
 use super::daq::config::{ComediConfig, RawDaq};
 use super::frames::config::{PipeConfig, RawFrames, V4l2Config};
 use super::haptic::config::{HidConfig, OpenHapticsConfig, RawHaptic};
-use crate::config::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, Range};
 
 /// One device section, as written in the file.
 pub(crate) type RawDevice = toml::Table;
@@ -151,21 +151,8 @@ pub(crate) fn in_range(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use std::path::Path;
-
-    use super::*;
-    use crate::config::Config;
-
-    const BASE: &str = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n";
-
-    pub(crate) fn parse(devices: &str) -> Result<Config, ConfigError> {
-        Config::from_toml_str(&format!("{BASE}{devices}"), Path::new("lab.toml"))
-    }
-
-    pub(crate) fn error_of(devices: &str) -> String {
-        parse(devices).unwrap_err().to_string()
-    }
+mod tests {
+    use crate::config::testing::{error_of, parse};
 
     #[test]
     fn sim_is_the_default() {

@@ -7,7 +7,7 @@ use super::geometry::Entry;
 use super::rng::{sub_seed, Rng};
 use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
 use super::spec::{FrameSpec, Look, Style};
-use crate::config::{Threshold, DEFAULT_WINDOW_DEG};
+use crate::vision::{Threshold, DEFAULT_WINDOW_DEG};
 
 /// Share of each style in mixed sets (as in the public `mixed` sample).
 const STYLE_WEIGHTS: [(Style, f64); 4] = [

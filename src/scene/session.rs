@@ -14,7 +14,7 @@ use super::geometry::{Entry, ProbeGeometry};
 use super::render::{Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
-use crate::config::Threshold;
+use crate::vision::Threshold;
 
 /// Magnifications an operator picks from (those of the public samples).
 pub const MAGNIFICATIONS: [f64; 6] = [1000.0, 1500.0, 2000.0, 3500.0, 5000.0, 8000.0];
@@ -138,7 +138,7 @@ impl Session {
         }
     }
 
-    /// The `probe.toml` text (parses with [`crate::config::Config::load`]).
+    /// The `probe.toml` text (a configuration file: it parses with `Config::load`).
     pub fn probe_toml(&self) -> String {
         let probe = self.probe();
         let clicks = self.clicks();

@@ -6,7 +6,7 @@ use serde::Deserialize;
 use super::contact::SampleParams;
 use super::operator::OperatorParams;
 use super::stage::StageParams;
-use crate::config::{Checker, ConfigError, List, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 
 // The accepted ranges, documented with the same words in config/sim.toml: a simulated
 // lab that stays a lab (an S100-like stage, an SEM, a person's hand).

@@ -8,10 +8,10 @@ use nalgebra::Vector3;
 
 use super::config::SemParams;
 use super::contact::{Bending, Contact};
-use crate::config::{CalibrationConfig, Threshold};
 use crate::hw::frames::FrameTruth;
 use crate::model::Cantilever;
 use crate::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
+use crate::vision::{CalibrationConfig, Threshold};
 
 /// The probe as the simulated SEM draws it: the typical pyramid on the configured beam.
 pub fn probe_for(cantilever: &Cantilever) -> ProbeGeometry {

@@ -25,8 +25,8 @@ use std::collections::VecDeque;
 use image::GrayImage;
 
 use super::geometry::{add, dot, norm, principal_axis, scale, sub, unit, Line};
+use super::options::{CalibrationConfig, TrackerConfig};
 use super::{Calibration, VisionError};
-use crate::config::{CalibrationConfig, TrackerConfig};
 
 /// Radius of the ring around the apex on which the pyramid's arc is found, pixels.
 const RING_PX: f64 = 10.0;

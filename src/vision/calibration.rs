@@ -18,11 +18,11 @@ use super::edges::EdgeMap;
 use super::geometry::{
     add, along, dot, norm, principal_axis, scale, screen_deg_from_image_rad, sub, Line,
 };
+use super::options::{CalibrationConfig, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner, Turns};
 use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
 use super::{Edge, VisionError};
-use crate::config::{CalibrationConfig, TrackerConfig};
 
 /// Largest distance (detection pixels) of the edge pixels used from the clicked line.
 const CLICK_BAND_PX: f64 = 3.0;

@@ -34,6 +34,7 @@ mod edges;
 mod geometry;
 mod hough;
 mod hypothesis;
+mod options;
 mod overlay;
 mod pyramid;
 mod refine;
@@ -45,11 +46,12 @@ mod verify;
 
 use std::fmt;
 
-use crate::config::PixelOrigin;
-
 pub use autocal::{auto_calibrate, clicks_from_apex, find_apex, AutoCalError, AutoClicks};
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
+pub use options::{
+    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
+};
 pub use overlay::{draw_calibration, draw_overlay};
 pub use simd::set_avx2;
 pub use tracker::Tracker;

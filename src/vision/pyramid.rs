@@ -10,8 +10,8 @@
 use image::GrayImage;
 
 use super::geometry::truncate_index;
+use super::options::Threshold;
 use super::simd::dispatch;
-use crate::config::Threshold;
 
 /// Target width of the detection image, pixels.
 const DETECTION_WIDTH: u32 = 320;

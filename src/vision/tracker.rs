@@ -21,12 +21,12 @@ use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
+use super::options::{PixelOrigin, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
-use crate::config::{PixelOrigin, Threshold, TrackerConfig};
 use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.

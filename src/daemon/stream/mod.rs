@@ -8,7 +8,6 @@
 //! socket. A full ring drops the record and counts it; a send that fails (nobody
 //! listening on loopback: connection refused) is counted and logged at most every
 //! [`ERROR_LOG_EVERY`], and the run goes on.
-pub mod config;
 pub mod datagram;
 
 use std::io;
@@ -20,11 +19,11 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-pub use self::config::StreamConfig;
 use self::datagram::Format;
 use super::haptic_loop::TickRecord;
 use super::PublishedEstimate;
 use crate::config::PixelOrigin;
+pub use crate::config::StreamConfig;
 use crate::session::utc::UtcAnchor;
 
 /// Records the rings hold: about 4 s of estimates at 60 frames/s, 1 s of haptic

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, List, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 use crate::hw::config::{backend_name, in_range, only_for, required, DaqBackend};
 
 // The accepted ranges, documented with the same words in config/lab.example.toml.
@@ -243,7 +243,7 @@ impl RawAxis {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::DaqBackend;
     use crate::hw::daq::config::*;
 

@@ -1,6 +1,6 @@
 //! The S100's rate commands: a [`RateOutput`] turns a stage velocity into the DAQ's
-//! outputs. Dropping one must leave the outputs at zero. Backends: [`sim`] (always) and
-//! `comedi` (cargo feature `comedi`).
+//! outputs. Dropping one must leave the outputs at zero. Backends: `comedi` (cargo
+//! feature `comedi`) and the simulated S100 (`"sim"`, always; in the `sim` module).
 use nalgebra::Vector3;
 
 #[derive(Debug, thiserror::Error)]
@@ -28,4 +28,3 @@ pub mod comedi;
 #[cfg(feature = "comedi")]
 pub mod comedi_sys;
 pub mod config;
-pub mod sim;

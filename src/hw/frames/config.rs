@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, Range};
 
 /// The frame rate asked of the driver: a slow SEM scan (10 s a frame) to a fast camera.
 const RATE_HZ: Range = Range::new(0.1, 1000.0, "Hz");
@@ -222,7 +222,7 @@ impl RawFrames {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::FramesBackend;
     use crate::hw::frames::config::*;
 

@@ -1,6 +1,7 @@
 //! SEM frames: a [`FrameSource`] blocks until the next frame, fills a reused grey buffer
 //! and says when it was captured (on the daemon's [`Clock`](crate::hw::Clock)).
-//! Backends: [`sim`] and [`pipe`] (always), `v4l2` (cargo feature `v4l2`);
+//! Backends: [`pipe`] (always), `v4l2` (cargo feature `v4l2`) and the simulated SEM
+//! (`"sim"`, always; in the `sim` module);
 //! [`recording`] reads the frames a session recorded back.
 use image::GrayImage;
 
@@ -46,7 +47,6 @@ pub mod config;
 pub mod convert;
 pub mod pipe;
 pub mod recording;
-pub mod sim;
 #[cfg(feature = "v4l2")]
 pub mod v4l2;
 #[cfg(feature = "v4l2")]

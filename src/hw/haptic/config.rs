@@ -6,7 +6,7 @@
 //! `[haptic.force]`.
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, List, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 
 /// The stylus travel a HID axis's raw span maps to: a PHANToM's workspace is 70 to
 /// 380 mm across.
@@ -249,7 +249,7 @@ impl RawHidForce {
 
 #[cfg(test)]
 mod tests {
-    use crate::hw::config::tests::{error_of, parse};
+    use crate::config::testing::{error_of, parse};
     use crate::hw::config::HapticBackend;
     use crate::hw::haptic::config::*;
 

@@ -12,8 +12,7 @@ use nalgebra::Vector3;
 use super::config::HidConfig;
 use super::hid_report::{force_report_into, position_mm, VelocityEstimator};
 use super::hidapi_sys::{Device, HidError};
-use super::{HapticDevice, HapticError};
-use crate::control::HapticSample;
+use super::{HapticDevice, HapticError, HapticSample};
 
 /// Reports drained per call at most (a device sends one per ms at the fastest).
 const MAX_REPORTS_PER_READ: usize = 64;

@@ -1,9 +1,15 @@
 //! The operator's stylus: a [`HapticDevice`] gives position and velocity and takes a
-//! force, in its own frame (millimetres, newtons). Backends: [`sim`] (always),
-//! `openhaptics` (cargo feature `openhaptics`) and `hid` (cargo feature `hidapi`).
+//! force, in its own frame (millimetres, newtons). Backends: `openhaptics`
+//! (cargo feature `openhaptics`), `hid` (cargo feature `hidapi`) and the scripted
+//! operator's stylus (`"sim"`, always; in the `sim` module).
 use nalgebra::Vector3;
 
-use crate::control::HapticSample;
+/// The stylus as read this tick (haptic frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HapticSample {
+    pub position_mm: Vector3<f64>,
+    pub velocity_mm_s: Vector3<f64>,
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum HapticError {
@@ -42,4 +48,3 @@ pub mod hid_report;
 pub mod hidapi_sys;
 #[cfg(feature = "openhaptics")]
 pub mod openhaptics;
-pub mod sim;

@@ -20,8 +20,7 @@ use nalgebra::Vector3;
 
 use super::config::OpenHapticsConfig;
 use super::hd_sys::{self as hd, Api, Fault, Hhd};
-use super::{HapticDevice, HapticError};
-use crate::control::HapticSample;
+use super::{HapticDevice, HapticError, HapticSample};
 
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Sample {

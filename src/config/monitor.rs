@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, Range};
 
 // The accepted ranges, documented with the same words in config/sim.toml.
 /// Each page holds a connection and a JPEG stream: a handful of people watch a lab.

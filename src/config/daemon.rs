@@ -4,9 +4,34 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
-use super::LoopOptions;
-use crate::config::{Checker, ConfigError};
+use crate::checks::{Checker, ConfigError};
 
+/// Loop settings that are not teleoperation gains.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoopOptions {
+    /// SCHED_FIFO priority to request (None: leave the scheduler alone).
+    pub rt_priority: Option<i32>,
+    pub lock_memory: bool,
+    /// Busy-wait this long before each deadline for a precise wake-up.
+    pub spin_us: u64,
+    /// PM QoS limit on CPU wake-up latency held while the loop runs (None: leave the
+    /// system's setting).
+    pub cpu_latency_us: Option<u32>,
+    /// Record every n-th tick in the telemetry.
+    pub telemetry_every: u32,
+}
+
+impl Default for LoopOptions {
+    fn default() -> Self {
+        LoopOptions {
+            rt_priority: Some(80),
+            lock_memory: true,
+            spin_us: 60,
+            cpu_latency_us: Some(0),
+            telemetry_every: 10,
+        }
+    }
+}
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawDaemon {

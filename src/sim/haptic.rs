@@ -1,10 +1,9 @@
 //! The `"sim"` haptic backend: the stylus held by the scripted virtual operator
-//! ([`crate::sim::operator`]), who feels the forces the daemon renders.
+//! ([`super::operator`]), who feels the forces the daemon renders.
 use nalgebra::Vector3;
 
-use super::{HapticDevice, HapticError};
-use crate::control::HapticSample;
-use crate::sim::operator::Operator;
+use super::operator::Operator;
+use crate::hw::haptic::{HapticDevice, HapticError, HapticSample};
 
 pub struct SimHaptic {
     operator: Operator,

@@ -7,166 +7,29 @@
 //! `probe.toml: cantilever.length_um must be > 0, got -3`.
 //! The documented defaults of every key live in `config/`.
 
-use std::fmt;
 use std::path::{Path, PathBuf};
 
-use serde::de::Error as _;
-use serde::{Deserialize, Deserializer};
+use serde::Deserialize;
 
+pub mod daemon;
+pub mod monitor;
+pub mod stream;
+
+use self::daemon::RawDaemon;
+pub use self::daemon::{DaemonConfig, LoopOptions};
+pub use self::monitor::MonitorConfig;
+use self::monitor::RawMonitor;
+use self::stream::RawStream;
+pub use self::stream::StreamConfig;
+pub(crate) use crate::checks::Checker;
+pub use crate::checks::{ConfigError, Number, Range, Zero};
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
-use crate::daemon::config::{DaemonConfig, RawDaemon};
-use crate::daemon::stream::config::RawStream;
-use crate::daemon::stream::StreamConfig;
 use crate::hw::config::{DevicesConfig, RawDevice};
 use crate::model::Cantilever;
-use crate::monitor::config::{MonitorConfig, RawMonitor};
 use crate::sim::config::{RawSim, SimConfig};
-
-/// Default half-width of the Hough search window around each calibrated edge, degrees.
-pub const DEFAULT_WINDOW_DEG: f64 = 20.0;
-
-/// Something wrong with a configuration file.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    #[error("{file}: cannot read: {source}")]
-    Read {
-        file: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{file}: {message}")]
-    Parse { file: PathBuf, message: String },
-    #[error("{file}: {key} = {value} is out of range: accepted {accepted}")]
-    OutOfRange {
-        file: PathBuf,
-        key: String,
-        value: String,
-        accepted: Range,
-    },
-    #[error("{file}: {key} {reason}, got {value}")]
-    Invalid {
-        file: PathBuf,
-        key: String,
-        value: String,
-        reason: String,
-    },
-    #[error("{file}: {message}")]
-    Inconsistent { file: PathBuf, message: String },
-}
-
-/// The accepted values of a number a lab types, with its unit: the one rule every
-/// numeric key is checked against ([`Checker::number`]), so every refusal reads the same
-/// (`probe.toml: cantilever.length_um = 1e308 is out of range: accepted 10 to 1000 um`)
-/// and `config/` documents each key's range in the same words.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Range {
-    pub lo: f64,
-    pub hi: f64,
-    /// Printed after the bounds; empty for a plain count.
-    pub unit: &'static str,
-    pub zero: Zero,
-}
-
-/// How a range treats 0.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Zero {
-    /// Like any other value: accepted when inside the bounds.
-    AsRange,
-    /// Also accepted below the bounds (0 switches the feature off).
-    Allowed,
-    /// Refused although inside the bounds (a signed factor that must not vanish).
-    Refused,
-}
-
-impl Range {
-    /// `lo` to `hi`, both included.
-    pub const fn new(lo: f64, hi: f64, unit: &'static str) -> Range {
-        Range {
-            lo,
-            hi,
-            unit,
-            zero: Zero::AsRange,
-        }
-    }
-
-    /// The same range, and 0 as well.
-    pub const fn or_zero(self) -> Range {
-        Range {
-            zero: Zero::Allowed,
-            ..self
-        }
-    }
-
-    /// The same range without 0.
-    pub const fn except_zero(self) -> Range {
-        Range {
-            zero: Zero::Refused,
-            ..self
-        }
-    }
-
-    /// Whether `value` is accepted (never a NaN or an infinity).
-    pub fn contains(&self, value: f64) -> bool {
-        match self.zero {
-            Zero::Allowed if value == 0.0 => true,
-            Zero::Refused if value == 0.0 => false,
-            _ => value.is_finite() && (self.lo..=self.hi).contains(&value),
-        }
-    }
-}
-
-impl fmt::Display for Range {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.zero == Zero::Allowed {
-            f.write_str("0 or ")?;
-        }
-        write!(f, "{} to {}", Number(self.lo), Number(self.hi))?;
-        if !self.unit.is_empty() {
-            write!(f, " {}", self.unit)?;
-        }
-        if self.zero == Zero::Refused {
-            f.write_str(", not 0")?;
-        }
-        Ok(())
-    }
-}
-
-/// A number as a person reads it in a message: plain between 1e-4 and 1e7, else with an
-/// exponent (`1e300`, not 301 digits), and `nan`/`inf` spelt as in TOML.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Number(pub f64);
-
-impl fmt::Display for Number {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let v = self.0;
-        if v.is_nan() {
-            f.write_str("nan")
-        } else if v.is_infinite() {
-            f.write_str(if v > 0.0 { "inf" } else { "-inf" })
-        } else if v == 0.0 || (1e-4..1e7).contains(&v.abs()) {
-            write!(f, "{v}")
-        } else {
-            write!(f, "{v:e}")
-        }
-    }
-}
-
-/// A TOML list of exactly `N` items. serde's own `[T; N]` lets the TOML reader drop
-/// extra items silently (`[2.0, 2.0, 2.0, 9.0]` read as three axes), so every
-/// fixed-size list in a configuration is read through this.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct List<T, const N: usize>(pub [T; N]);
-
-impl<'de, T: Deserialize<'de>, const N: usize> Deserialize<'de> for List<T, N> {
-    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let items = Vec::<T>::deserialize(deserializer)?;
-        let len = items.len();
-        let expected = format!("a list of {N} items");
-        items
-            .try_into()
-            .map(List)
-            .map_err(|_| D::Error::invalid_length(len, &expected.as_str()))
-    }
-}
+pub use crate::vision::{
+    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
+};
 
 /// A validated configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -188,79 +51,6 @@ pub struct Config {
     pub sim: SimConfig,
 }
 
-/// How the frame is binarised before edge detection.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Threshold {
-    /// A fixed grey level (8-bit scale).
-    Level(u8),
-    /// Otsu's method on each frame's histogram.
-    Otsu,
-}
-
-impl fmt::Display for Threshold {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Threshold::Level(level) => write!(f, "{level}"),
-            Threshold::Otsu => f.write_str("\"otsu\""),
-        }
-    }
-}
-
-/// Where pixel coordinates count from, in the config's clicks and in every output
-/// (`tracker.pixel_origin`). Inside nanoforce pixels always follow docs/conventions.md
-/// (`Centre`); the conversion happens where numbers enter or leave.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PixelOrigin {
-    /// docs/conventions.md: the top-left pixel's centre is (0, 0).
-    #[default]
-    Centre,
-    /// The top-left pixel's top-left corner is (0, 0), so its centre is (0.5, 0.5)
-    /// (ImageJ's sub-pixel coordinates, and the public samples' truth).
-    Corner,
-}
-
-impl PixelOrigin {
-    /// What to add to a centre-counted coordinate to express it from this origin.
-    pub fn offset_px(self) -> f64 {
-        match self {
-            PixelOrigin::Centre => 0.0,
-            PixelOrigin::Corner => 0.5,
-        }
-    }
-
-    /// A centre-counted point expressed from this origin.
-    pub fn output(self, p: [f64; 2]) -> [f64; 2] {
-        p.map(|v| v + self.offset_px())
-    }
-
-    /// A point given from this origin, counted from the pixel centre.
-    pub fn input(self, p: [f64; 2]) -> [f64; 2] {
-        p.map(|v| v - self.offset_px())
-    }
-
-    /// Parses the config's spelling (`"centre"`, `"center"` or `"corner"`).
-    pub fn parse(text: &str) -> Option<PixelOrigin> {
-        match text.to_ascii_lowercase().as_str() {
-            "centre" | "center" => Some(PixelOrigin::Centre),
-            "corner" => Some(PixelOrigin::Corner),
-            _ => None,
-        }
-    }
-}
-
-impl fmt::Display for PixelOrigin {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            PixelOrigin::Centre => "centre",
-            PixelOrigin::Corner => "corner",
-        })
-    }
-}
-
-/// Largest `tracker.edge_bias_px` accepted, pixels: the edge effect moves an imaged
-/// outline by a fraction of the blur, never by pixels.
-pub const MAX_EDGE_BIAS_PX: f64 = 2.0;
-
 // The accepted ranges of `[cantilever]` and `[tracker]`, documented with the same words
 // in config/probe.example.toml. The cantilever's span what AFM cantilevers are made as:
 // from short high-frequency levers (10 um) to the longest soft ones (under 1 mm), from
@@ -277,57 +67,6 @@ pub const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
 const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
 /// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
 const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");
-
-/// Validated `[tracker]` section.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrackerConfig {
-    pub threshold: Threshold,
-    /// Half-width of the search window around each calibrated edge orientation, degrees.
-    pub window_deg: f64,
-    /// Where the clicks below and every reported pixel count from.
-    pub pixel_origin: PixelOrigin,
-    /// How far outside the probe's true outline the SEM images it (the edge effect),
-    /// frame pixels; the apex is reported where the true faces meet. 0 reports where
-    /// the imaged faces meet.
-    pub edge_bias_px: f64,
-    pub calibration: Option<CalibrationConfig>,
-}
-
-impl Default for TrackerConfig {
-    fn default() -> Self {
-        TrackerConfig {
-            threshold: Threshold::Otsu,
-            window_deg: DEFAULT_WINDOW_DEG,
-            pixel_origin: PixelOrigin::Centre,
-            edge_bias_px: 0.0,
-            calibration: None,
-        }
-    }
-}
-
-/// Validated `[tracker.calibration]`: the reference frame and the pixels a person
-/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre:
-/// clicks given from the corner are converted on reading).
-#[derive(Debug, Clone, PartialEq)]
-pub struct CalibrationConfig {
-    /// Resolved against the config file's directory.
-    pub reference_image: PathBuf,
-    pub red: Vec<[f64; 2]>,
-    pub blue: Vec<[f64; 2]>,
-    pub green: Vec<[f64; 2]>,
-}
-
-impl CalibrationConfig {
-    /// Clicks given from `origin`, brought to count from the pixel centre.
-    pub fn counted_from(mut self, origin: PixelOrigin) -> CalibrationConfig {
-        for points in [&mut self.red, &mut self.blue, &mut self.green] {
-            for p in points.iter_mut() {
-                *p = origin.input(*p);
-            }
-        }
-        self
-    }
-}
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -435,121 +174,7 @@ impl Config {
     }
 }
 
-/// Validation helpers that know which file they are checking.
-pub(crate) struct Checker<'a> {
-    file: &'a Path,
-}
-
 impl Checker<'_> {
-    pub(crate) fn invalid(&self, key: &str, value: impl fmt::Display, reason: &str) -> ConfigError {
-        ConfigError::Invalid {
-            file: self.file.to_path_buf(),
-            key: key.to_string(),
-            value: value.to_string(),
-            reason: reason.to_string(),
-        }
-    }
-
-    pub(crate) fn inconsistent(&self, message: String) -> ConfigError {
-        ConfigError::Inconsistent {
-            file: self.file.to_path_buf(),
-            message,
-        }
-    }
-
-    /// A number in `range`; out of it (or not finite), an error naming the key, the
-    /// value and the accepted range.
-    pub(crate) fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
-        if range.contains(value) {
-            Ok(value)
-        } else {
-            Err(self.out_of_range(key, Number(value), range))
-        }
-    }
-
-    /// An optional number: checked against `range` when given, else `default`.
-    pub(crate) fn number_or(
-        &self,
-        key: &str,
-        value: Option<f64>,
-        default: f64,
-        range: Range,
-    ) -> Result<f64, ConfigError> {
-        value.map_or(Ok(default), |v| self.number(key, v, range))
-    }
-
-    /// A whole number in `range`.
-    pub(crate) fn whole(&self, key: &str, value: i64, range: Range) -> Result<i64, ConfigError> {
-        // Exact: every bound in use is far below 2^53.
-        if range.contains(value as f64) {
-            Ok(value)
-        } else {
-            Err(self.out_of_range(key, value, range))
-        }
-    }
-
-    /// One number per axis, each in `range`; an error names the axis (`key[1]`).
-    pub(crate) fn vector3(
-        &self,
-        key: &str,
-        v: [f64; 3],
-        range: Range,
-    ) -> Result<nalgebra::Vector3<f64>, ConfigError> {
-        for (axis, &value) in v.iter().enumerate() {
-            self.number(&format!("{key}[{axis}]"), value, range)?;
-        }
-        Ok(nalgebra::Vector3::from(v))
-    }
-
-    fn out_of_range(&self, key: &str, value: impl fmt::Display, range: Range) -> ConfigError {
-        ConfigError::OutOfRange {
-            file: self.file.to_path_buf(),
-            key: key.to_string(),
-            value: value.to_string(),
-            accepted: range,
-        }
-    }
-
-    /// A direction: finite, normalised here (it must not be zero).
-    pub(crate) fn unit_vector(
-        &self,
-        key: &str,
-        v: [f64; 3],
-    ) -> Result<nalgebra::Vector3<f64>, ConfigError> {
-        let vector = nalgebra::Vector3::from(v);
-        let norm = vector.norm();
-        if norm.is_finite() && norm > 1e-9 {
-            Ok(vector / norm)
-        } else {
-            Err(self.invalid(
-                key,
-                format_args!("{v:?}"),
-                "must be a finite, non-zero direction",
-            ))
-        }
-    }
-
-    /// A 3x3 matrix given as rows that is orthonormal (rotation or signed permutation).
-    pub(crate) fn orthonormal(
-        &self,
-        key: &str,
-        rows: [[f64; 3]; 3],
-    ) -> Result<nalgebra::Matrix3<f64>, ConfigError> {
-        let m = nalgebra::Matrix3::from_fn(|r, c| rows[r][c]);
-        let error = (m * m.transpose() - nalgebra::Matrix3::identity())
-            .abs()
-            .max();
-        if error.is_finite() && error < 1e-6 {
-            Ok(m)
-        } else {
-            Err(self.invalid(
-                key,
-                format_args!("{rows:?}"),
-                "must be orthonormal (a rotation or a signed permutation of the axes)",
-            ))
-        }
-    }
-
     fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
         let length_um = match raw.length_um {
             Some(v) => self.number("cantilever.length_um", v, LENGTH_UM)?,
@@ -720,6 +345,25 @@ impl Checker<'_> {
             ));
         }
         Ok(points)
+    }
+}
+
+/// Reading a lab file of one cantilever and the sections a test gives, for the tests of
+/// the sections other modules own (`[frames]`, `[daq]`, `[haptic]`).
+#[cfg(test)]
+pub(crate) mod testing {
+    use std::path::Path;
+
+    use super::{Config, ConfigError};
+
+    const BASE: &str = "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n";
+
+    pub(crate) fn parse(sections: &str) -> Result<Config, ConfigError> {
+        Config::from_toml_str(&format!("{BASE}{sections}"), Path::new("lab.toml"))
+    }
+
+    pub(crate) fn error_of(sections: &str) -> String {
+        parse(sections).unwrap_err().to_string()
     }
 }
 

@@ -1,4 +1,4 @@
-//! The live monitor: a small web page served by the daemon (latest frame with the
+//! The live monitor: a small web page served by the daemon's `monitor` thread (latest frame with the
 //! overlay, the sensed force as a scrolling plot, loop rates, the safety state), and the
 //! overlay thumbnails a recording keeps for `nanoforce report`.
 //!
@@ -8,10 +8,10 @@
 //! encoding PNGs, writing thumbnails and serving pages never touch the haptic loop or
 //! the tracker; a slow page loses updates, it cannot hold anything up.
 //!
-//! - [`config`]: `[monitor]` (off by default; loopback unless `allow_remote`);
+//! - `[monitor]` is read by [`crate::config::monitor`] (off by default; loopback unless
+//!   `allow_remote`);
 //! - `server`: the HTTP/1.1 + Server-Sent Events server and its client caps;
 //! - `state`: what each update says, built from the snapshots and counters.
-pub mod config;
 mod server;
 mod state;
 
@@ -22,7 +22,6 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-pub use self::config::MonitorConfig;
 use self::server::Hub;
 use self::state::Producer;
 use crate::daemon::haptic_loop::LoopShared;
@@ -31,6 +30,8 @@ use crate::daemon::pipeline::PipelineShared;
 use crate::daemon::snapshot::SnapshotReader;
 use crate::daemon::stream::StreamShared;
 use crate::daemon::telemetry::RecordingStatus;
+
+pub use crate::config::MonitorConfig;
 
 /// How often the page is updated.
 pub const UPDATE_PERIOD: Duration = Duration::from_millis(100);

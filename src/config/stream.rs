@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 
 use serde::Deserialize;
 
-use crate::config::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, Range};
 
 // The accepted range, documented with the same words in config/sim.toml.
 /// 0: no haptic stream; at most one datagram per tick of the 1 kHz loop.

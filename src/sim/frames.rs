@@ -2,11 +2,12 @@
 //! has bent it, at the configured rate and delay, with ground truth attached.
 use image::GrayImage;
 
-use super::{FrameError, FrameMeta, FrameSource};
-use crate::hw::daq::sim::StageSnapshot;
+use super::daq::StageSnapshot;
+use super::sem::SemScene;
+use crate::hw::clock::sleep_until;
+use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
 use crate::hw::Clock;
 use crate::scene::Renderer;
-use crate::sim::sem::SemScene;
 
 /// Slack between the end of a render and its frame's delivery, seconds.
 const RENDER_MARGIN_S: f64 = 0.001;
@@ -66,7 +67,7 @@ impl FrameSource for SimSem {
         // frame's delivery, where the two would compete for the cores.
         let deliver_s = capture_s + delay_s;
         let start_s = deliver_s - (2.0 * self.render_s + RENDER_MARGIN_S);
-        crate::daemon::rt::sleep_until(self.clock.monotonic_ns_at(start_s), 0);
+        sleep_until(self.clock.monotonic_ns_at(start_s), 0);
         let render_started_s = self.clock.now_s();
         let stage_um = self
             .stage
@@ -78,7 +79,7 @@ impl FrameSource for SimSem {
         let took_s = self.clock.now_s() - render_started_s;
         self.render_s = took_s.max(self.render_s * 0.99);
         let deliver_ns = self.clock.monotonic_ns_at(deliver_s);
-        crate::daemon::rt::sleep_until(deliver_ns, 0);
+        sleep_until(deliver_ns, 0);
         self.sequence += 1;
         Ok(FrameMeta {
             sequence: self.sequence,

@@ -1,10 +1,10 @@
-//! The `"sim"` DAQ backend: rate commands move the simulated S100 ([`crate::sim::stage`]).
+//! The `"sim"` DAQ backend: rate commands move the simulated S100 ([`super::stage`]).
 //! Each command also publishes the stage's state for the simulated SEM, through a
 //! latest-only slot (the SEM never holds up the haptic loop).
 use nalgebra::Vector3;
 
-use super::{DaqError, RateOutput};
-use crate::sim::stage::{Stage, StageParams};
+use super::stage::{Stage, StageParams};
+use crate::hw::daq::{DaqError, RateOutput};
 
 /// The stage as the simulated SEM sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -1,0 +1,133 @@
+//! The tracker's options: how a frame is binarised ([`Threshold`]), where pixel
+//! coordinates count from ([`PixelOrigin`]), the `[tracker]` settings
+//! ([`TrackerConfig`]) and the clicked calibration ([`CalibrationConfig`]). `config`
+//! reads and validates them from TOML; vision owns them.
+use std::fmt;
+use std::path::PathBuf;
+
+/// Default half-width of the Hough search window around each calibrated edge, degrees.
+pub const DEFAULT_WINDOW_DEG: f64 = 20.0;
+
+/// How the frame is binarised before edge detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Threshold {
+    /// A fixed grey level (8-bit scale).
+    Level(u8),
+    /// Otsu's method on each frame's histogram.
+    Otsu,
+}
+
+impl fmt::Display for Threshold {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Threshold::Level(level) => write!(f, "{level}"),
+            Threshold::Otsu => f.write_str("\"otsu\""),
+        }
+    }
+}
+
+/// Where pixel coordinates count from, in the config's clicks and in every output
+/// (`tracker.pixel_origin`). Inside nanoforce pixels always follow docs/conventions.md
+/// (`Centre`); the conversion happens where numbers enter or leave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PixelOrigin {
+    /// docs/conventions.md: the top-left pixel's centre is (0, 0).
+    #[default]
+    Centre,
+    /// The top-left pixel's top-left corner is (0, 0), so its centre is (0.5, 0.5)
+    /// (ImageJ's sub-pixel coordinates, and the public samples' truth).
+    Corner,
+}
+
+impl PixelOrigin {
+    /// What to add to a centre-counted coordinate to express it from this origin.
+    pub fn offset_px(self) -> f64 {
+        match self {
+            PixelOrigin::Centre => 0.0,
+            PixelOrigin::Corner => 0.5,
+        }
+    }
+
+    /// A centre-counted point expressed from this origin.
+    pub fn output(self, p: [f64; 2]) -> [f64; 2] {
+        p.map(|v| v + self.offset_px())
+    }
+
+    /// A point given from this origin, counted from the pixel centre.
+    pub fn input(self, p: [f64; 2]) -> [f64; 2] {
+        p.map(|v| v - self.offset_px())
+    }
+
+    /// Parses the config's spelling (`"centre"`, `"center"` or `"corner"`).
+    pub fn parse(text: &str) -> Option<PixelOrigin> {
+        match text.to_ascii_lowercase().as_str() {
+            "centre" | "center" => Some(PixelOrigin::Centre),
+            "corner" => Some(PixelOrigin::Corner),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for PixelOrigin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            PixelOrigin::Centre => "centre",
+            PixelOrigin::Corner => "corner",
+        })
+    }
+}
+
+/// Largest `tracker.edge_bias_px` accepted, pixels: the edge effect moves an imaged
+/// outline by a fraction of the blur, never by pixels.
+pub const MAX_EDGE_BIAS_PX: f64 = 2.0;
+
+/// Validated `[tracker]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerConfig {
+    pub threshold: Threshold,
+    /// Half-width of the search window around each calibrated edge orientation, degrees.
+    pub window_deg: f64,
+    /// Where the clicks below and every reported pixel count from.
+    pub pixel_origin: PixelOrigin,
+    /// How far outside the probe's true outline the SEM images it (the edge effect),
+    /// frame pixels; the apex is reported where the true faces meet. 0 reports where
+    /// the imaged faces meet.
+    pub edge_bias_px: f64,
+    pub calibration: Option<CalibrationConfig>,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        TrackerConfig {
+            threshold: Threshold::Otsu,
+            window_deg: DEFAULT_WINDOW_DEG,
+            pixel_origin: PixelOrigin::Centre,
+            edge_bias_px: 0.0,
+            calibration: None,
+        }
+    }
+}
+
+/// Validated `[tracker.calibration]`: the reference frame and the pixels a person
+/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre:
+/// clicks given from the corner are converted on reading).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationConfig {
+    /// Resolved against the config file's directory.
+    pub reference_image: PathBuf,
+    pub red: Vec<[f64; 2]>,
+    pub blue: Vec<[f64; 2]>,
+    pub green: Vec<[f64; 2]>,
+}
+
+impl CalibrationConfig {
+    /// Clicks given from `origin`, brought to count from the pixel centre.
+    pub fn counted_from(mut self, origin: PixelOrigin) -> CalibrationConfig {
+        for points in [&mut self.red, &mut self.blue, &mut self.green] {
+            for p in points.iter_mut() {
+                *p = origin.input(*p);
+            }
+        }
+        self
+    }
+}
