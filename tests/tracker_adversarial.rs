@@ -101,17 +101,19 @@ fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
     out
 }
 
-/// False detections per kind measured on the held-out seed 2027 (1080 frames) with
-/// today's checks. The goal is none on any kind (docs/tracker.md, "What the tracker
-/// refuses, and why"); until the per-edge checks land, these bounds catch a regression
-/// and a kind that reaches zero stays there.
+/// False detections per kind measured on the held-out seed 2027 (1080 frames) with the
+/// per-edge checks (docs/tracker.md, "What the tracker refuses, and why"). The goal is
+/// none on any kind; what remains is mostly a probe whose beam is two to three times
+/// thicker or thinner, which the three tracked edges alone do not tell apart (the
+/// beam's lower face is not part of the calibration). These bounds catch a
+/// regression, and a kind that reaches zero stays there.
 const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
-    ("mirrored", 43),
-    ("occluded", 106),
-    ("other-probe", 119),
-    ("real-sem", 2),
-    ("shapes", 4),
+    ("mirrored", 2),
+    ("occluded", 3),
+    ("other-probe", 58),
+    ("real-sem", 1),
+    ("shapes", 1),
 ];
 
 #[test]
@@ -153,4 +155,17 @@ fn the_decoys_are_probe_like() {
     let (mut probe, _) = scene::render(&spec);
     image::imageops::flip_horizontal_in_place(&mut probe);
     assert_eq!(a, probe);
+    // A mirrored or other probe shows its whole tip (the wedge alone, mirrored, is the
+    // probe's wedge turned): apex, pyramid base and the beam's free end in the frame.
+    let mut outline = Vec::new();
+    for decoy in [Decoy::Mirrored, Decoy::OtherProbe] {
+        for seed in 0..20 {
+            let spec = adversary.render_into(&session, decoy, seed, &mut a);
+            assert!(
+                adversarial::shows_whole_tip(&spec, &mut outline),
+                "{} seed {seed}",
+                decoy.name()
+            );
+        }
+    }
 }

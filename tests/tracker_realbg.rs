@@ -111,12 +111,13 @@ fn suite_of_600_frames_over_real_backgrounds() {
             idx.iter().map(|&i| e[i]).collect(),
         )
     };
-    // Measured on seed 71: 573 of 574 detected (99.8 %; a dark probe at 1103x with a
-    // needle beside it missed); 1 blank frame with a needle in view detected (session
-    // 7, confidence 0.53); angle error median 0.0317, p95 0.128 deg (noise 30-48 frames
-    // included), apex median 0.26 px.
+    // Measured on seed 71: 572 of 574 detected (99.65 %; a dark probe at 1103x with a
+    // needle beside it missed, and one whose best placement lies 20 px off the apex,
+    // its back face not where the pose puts it, refused); no false detection (blank
+    // frames with a needle in view included); angle error median 0.0320, p95 0.128 deg (noise 30-48 frames included),
+    // apex median 0.26 px.
     assert!(sc.detect_rate >= 0.995, "{why}");
-    assert!(sc.false_detections <= 1, "{why}");
+    assert_eq!(sc.false_detections, 0, "{why}");
     assert!(sc.angle_err_median_deg <= 0.033, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
     assert!(sc.tip_err_median_px <= 0.3, "{why}");

@@ -12,7 +12,7 @@ use image::GrayImage;
 
 use super::blur::Blur;
 use super::generate::random_frame;
-use super::geometry::ProbeGeometry;
+use super::geometry::{probe_outline, ProbeGeometry};
 use super::raster::Rasterizer;
 use super::render::Renderer;
 use super::rng::{add_gaussian_noise, sub_seed, Rng};
@@ -52,6 +52,23 @@ impl Decoy {
             Decoy::Occluded => "occluded",
         }
     }
+}
+
+/// Most placements drawn for a mirrored or other probe before the last is kept.
+const MAX_REDRAWS: usize = 64;
+/// How far inside the frame the tip's corners must lie, pixels.
+const WHOLE_TIP_MARGIN_PX: f64 = 8.0;
+
+/// Whether the frame of `spec` shows the probe's whole tip: the apex, the pyramid's
+/// base on both faces and the beam's free end, each [`WHOLE_TIP_MARGIN_PX`] inside.
+/// `outline` is scratch space.
+pub fn shows_whole_tip(spec: &FrameSpec, outline: &mut Vec<[f64; 2]>) -> bool {
+    let e = probe_outline(&spec.probe, &spec.pose(), spec.width, spec.height, outline);
+    let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+    let m = WHOLE_TIP_MARGIN_PX;
+    [e.red.to, e.blue.from, e.blue.to, e.green.to]
+        .iter()
+        .all(|p| p[0] >= m && p[1] >= m && p[0] <= w - 1.0 - m && p[1] <= h - 1.0 - m)
 }
 
 /// Random streams of an adversarial frame.
@@ -106,6 +123,20 @@ impl Adversary {
         let mut spec = random_frame(&setup, style, mag, angle, &mut rng);
         spec.blank = false;
         let mut shapes = Rng::new(sub_seed(seed, STREAM_SHAPES));
+        if matches!(decoy, Decoy::Mirrored | Decoy::OtherProbe) {
+            // Only the whole tip tells these from the probe: the wedge alone, mirrored, is
+            // the probe's wedge turned, and another beam is out of view. The magnification
+            // and placement are drawn again until the beam's free end and the pyramid's
+            // base are in the frame.
+            for _ in 0..MAX_REDRAWS {
+                if shows_whole_tip(&spec, &mut self.polygon) {
+                    break;
+                }
+                let mag = rng.log_uniform(1000.0, 8000.0).round();
+                spec = random_frame(&setup, style, mag, angle, &mut rng);
+                spec.blank = false;
+            }
+        }
         match decoy {
             Decoy::Clutter => {
                 spec.blank = true;

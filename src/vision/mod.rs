@@ -16,6 +16,8 @@
 //!   grey levels, with a bend term for the curved beam edge;
 //! - `verify`: is it the tip (contrast of every edge in view, a bright pyramid, a
 //!   precise rotation), and the confidence;
+//! - `stations`: is it this probe: every edge in view steps as calibrated at stations
+//!   along its predicted length (docs/tracker.md, "What the tracker refuses, and why");
 //! - `sigma`: the reported standard error of the rotation, calibrated on rendered suites;
 //! - `tracker`: the per-frame driver and coherence;
 //! - `calibration`: the template learned from the reference image and clicked pixels;
@@ -40,6 +42,7 @@ mod pyramid;
 mod refine;
 mod sigma;
 mod simd;
+mod stations;
 mod template;
 mod tracker;
 mod verify;

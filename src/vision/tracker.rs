@@ -24,7 +24,8 @@ use super::hypothesis::{Hypothesis, Prior, Search};
 use super::options::{PixelOrigin, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
-use super::template::{Pose, Template};
+use super::stations;
+use super::template::{Pose, Template, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::model::Cantilever;
@@ -367,8 +368,16 @@ impl Tracker {
     }
 
     /// Why a refined tip is not this probe's, if it is not: the apex outside the
-    /// frame, or the rotation outside the window (beyond its standard error).
-    fn refusal(&self, frame: &GrayImage, pose: &Pose, fit: &FitResult) -> Option<Miss> {
+    /// frame, the rotation outside the window (beyond its standard error), or an edge
+    /// in view that the frame does not show as calibrated ([`stations::check_edges`]).
+    fn refusal(
+        &self,
+        frame: &GrayImage,
+        t: &Template,
+        pose: &Pose,
+        fit: &FitResult,
+        bands: &[Option<Band>; 3],
+    ) -> Option<Miss> {
         let [x, y] = pose.apex;
         let (w, h) = (frame.width() as f64, frame.height() as f64);
         if !(x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0) {
@@ -378,7 +387,9 @@ impl Tracker {
         if beyond > WINDOW_SIGMAS * fit.turn_sigma + WINDOW_SLACK_RAD {
             return Some(Miss::RotationOutside);
         }
-        None
+        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let red_fitted = bands[RED].is_some() && fit.edges[RED].is_some();
+        stations::check_edges(frame, t, pose, fit.blur, &calibrated, red_fitted)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -392,7 +403,7 @@ impl Tracker {
         bands: &[Option<Band>; 3],
     ) -> Estimate {
         let size = [frame.width() as f64, frame.height() as f64];
-        if let Some(miss) = self.refusal(frame, pose, fit) {
+        if let Some(miss) = self.refusal(frame, t, pose, fit, bands) {
             return Estimate::missed(miss, 0.0);
         }
         let in_view = bands.map(|b| b.is_some());

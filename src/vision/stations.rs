@@ -1,0 +1,422 @@
+//! The per-edge checks of verification: at stations along each edge the pose puts in
+//! view, does the frame step across it as this probe's calibrated edge does?
+//!
+//! A station averages the grey levels in two short runs parallel to the predicted
+//! edge, one on the probe's side and one outside, clear of the blurred step. Its step
+//! (inside minus outside) over the calibrated signed step is its ratio: about 1 on the
+//! probe's edge, 0 where nothing steps (a hidden or absent edge), negative where the
+//! grey levels step the other way (another body's edge, a mirror image's).
+//!
+//! An edge is refused as missing (`Miss::EdgeMissing`) when more than 30 % of its
+//! stations show nothing (a station whose outside is covered by something brighter
+//! than the probe while its inside keeps the probe's level is not counted against it),
+//! or when the two stations nearest its corner (the apex, the beam's free end) do not
+//! both show it: a tip hidden under a patch has no faces there. It steps the wrong way
+//! (`Miss::WrongAppearance`) when its median ratio is negative; a face whose last two
+//! stations toward its base show nothing is longer than the probe's at this scale, or
+//! runs on where the probe's does not (`Miss::ScaleMismatch`); and the probe's side of
+//! every edge is one body, of one level. The beam edge is checked with its free end in
+//! view, along its rigid block. When the fit left it out (a tip placed from its faces,
+//! the scale known to a few per cent) it is looked for parallel to where the pose puts
+//! it, within that slack, and must be found along its length as a face is (not
+//! necessarily at its corner, where a faint beam fades first), unless the slack
+//! reaches out of the frame: a mirrored probe's faces make a wedge, but its beam runs
+//! the other way.
+
+use image::GrayImage;
+
+use super::geometry::{clip_to_rect, norm, sub, Line};
+use super::template::{Pose, Template, BLUE, GREEN, RED};
+use super::{Edge, Miss};
+
+/// Stations sampled along each edge.
+pub const STATIONS: usize = 10;
+/// A station shows the edge when its step is at least this share of the calibrated
+/// step, with its sign. A hidden or absent edge steps by nothing (or the other way); a
+/// true face whose apex dips into a bright substrate keeps 0.15-0.35 of its
+/// clean-reference step there.
+const HOLD_RATIO: f64 = 0.1;
+/// Share of an edge's stations that must show it.
+const HELD_SHARE: f64 = 0.7;
+/// Stations at each end of an edge: at the corner end all but one must show it (a tip
+/// under a patch fails there), at a face's far end at least one must show it or be
+/// covered (a face running short of the calibrated geometry at this scale fails there).
+const END_STATIONS: usize = 3;
+/// A face whose last this many stations toward its base show nothing is longer than
+/// the probe's at this scale (or runs on where the probe's does not).
+const FAR_MISSING: usize = 3;
+/// The probe's side of every edge in view is one body: their levels agree within this
+/// share of the calibrated beam step.
+const INSIDE_SPREAD: f64 = 0.5;
+/// A station whose outside is brighter than its inside (a particle, a substrate) still
+/// shows the probe when its inside lies within this share of the calibrated step of
+/// the probe's level along the edge.
+const COVERED_LEVEL: f64 = 0.25;
+/// A beam edge the fit left out is looked for parallel to its predicted line, up to
+/// this share of the apex's distance from it either way: a tip placed from its two
+/// faces alone has its scale, hence that distance, known to a few per cent.
+const RED_SLACK: f64 = 0.1;
+/// Along-edge half length of a station's sample run, pixels (at most).
+const STATION_HALF_PX: f64 = 3.0;
+/// Shortest visible stretch of an edge that is checked, frame pixels.
+const MIN_CHECKED_PX: f64 = 12.0;
+
+/// Where a station samples across an edge: from `margin_px` (clear of the blurred
+/// step) on, `inside_px` deep on the probe's side and `outside_px` on the other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sampling {
+    pub margin_px: f64,
+    pub inside_px: f64,
+    pub outside_px: f64,
+}
+
+impl Sampling {
+    /// For a frame of blur `blur_px` and a beam `beam_px` thick.
+    pub fn new(blur_px: f64, beam_px: f64) -> Sampling {
+        let margin_px = 1.5 * blur_px + 1.0;
+        Sampling {
+            margin_px,
+            inside_px: (0.8 * beam_px - margin_px).clamp(0.0, 3.0),
+            outside_px: 3.0,
+        }
+    }
+
+    fn reach(&self) -> f64 {
+        self.margin_px + self.inside_px.max(self.outside_px)
+    }
+}
+
+/// The grey levels across one predicted edge, station by station.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Profile {
+    /// Stations with samples on both sides.
+    pub stations: usize,
+    /// Per station: the step (inside minus outside) over the calibrated step.
+    pub ratio: [f64; STATIONS],
+    /// Per station: the mean level on the probe's side.
+    pub inside: [f64; STATIONS],
+    /// The calibrated signed step the ratios are relative to.
+    pub step: f64,
+    /// Whether the corner end is in view (not cut by the frame).
+    pub corner_in_view: bool,
+}
+
+/// Median of the first `n` values (n >= 1), without allocating.
+fn median(v: &[f64; STATIONS], n: usize) -> f64 {
+    let mut s = *v;
+    s[..n].sort_unstable_by(f64::total_cmp);
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+impl Profile {
+    fn held(&self, k: usize) -> bool {
+        self.ratio[k] >= HOLD_RATIO
+    }
+
+    fn held_in(&self, range: std::ops::Range<usize>) -> usize {
+        range.filter(|&k| self.held(k)).count()
+    }
+
+    /// Median step over the calibrated one.
+    pub fn step_ratio(&self) -> f64 {
+        median(&self.ratio, self.stations.max(1))
+    }
+
+    /// Median level on the probe's side.
+    pub fn inside_level(&self) -> f64 {
+        median(&self.inside, self.stations.max(1))
+    }
+
+    /// Whether station `k`'s outside is covered by something brighter (for a brighter
+    /// probe; darker for a darker one) than the probe while its inside has the probe's
+    /// level: a particle or substrate beside the edge, not a missing edge.
+    fn covered(&self, k: usize, probe_level: f64) -> bool {
+        self.ratio[k] <= -HOLD_RATIO
+            && (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs()
+    }
+
+    /// Whether the stations at the corner end show the edge: all but one of
+    /// [`END_STATIONS`].
+    pub fn corner_held(&self) -> bool {
+        self.held_in(0..END_STATIONS) + 1 >= END_STATIONS
+    }
+
+    /// Whether the probe is there at the corner end even where the edge does not
+    /// show: every corner station's inside keeps the level of the probe's side along
+    /// the rest of the edge (a bright substrate or particle outside it, not a patch
+    /// over the tip).
+    pub fn corner_inside_probe(&self) -> bool {
+        let probe_level = self.held_level();
+        (0..END_STATIONS)
+            .all(|k| (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs())
+    }
+
+    /// Median level on the probe's side over the stations that show the edge.
+    fn held_level(&self) -> f64 {
+        let mut held_inside = [0.0; STATIONS];
+        let mut m = 0;
+        for k in 0..self.stations {
+            if self.held(k) {
+                held_inside[m] = self.inside[k];
+                m += 1;
+            }
+        }
+        median(&held_inside, m.max(1))
+    }
+
+    /// Why this profile is not edge `edge` of the probe, if it is not (a face's
+    /// corner is judged with its partner's: [`check_edges`]).
+    pub fn refusal(&self, edge: Edge) -> Option<Miss> {
+        let n = self.stations;
+        if n < STATIONS {
+            return Some(Miss::EdgeMissing(edge));
+        }
+        let ratio = self.step_ratio();
+        if ratio <= -HOLD_RATIO {
+            return Some(Miss::WrongAppearance(edge));
+        }
+        let mut held_inside = [0.0; STATIONS];
+        let mut m = 0;
+        for k in 0..n {
+            if self.held(k) {
+                held_inside[m] = self.inside[k];
+                m += 1;
+            }
+        }
+        let probe_level = median(&held_inside, m.max(1));
+        let missing = |range: std::ops::Range<usize>| {
+            range
+                .filter(|&k| !self.held(k) && !self.covered(k, probe_level))
+                .count()
+        };
+        if (missing(0..n) as f64) > (1.0 - HELD_SHARE) * n as f64
+            || (edge == Edge::Red
+                && self.corner_in_view
+                && !self.corner_held()
+                && !self.corner_inside_probe())
+        {
+            return Some(Miss::EdgeMissing(edge));
+        }
+        if edge != Edge::Red && missing(n - FAR_MISSING..n) == FAR_MISSING {
+            return Some(Miss::ScaleMismatch);
+        }
+        None
+    }
+}
+
+/// The stretch of edge `e` the stations cover, with whether its corner end is in view.
+fn station_span(
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    size: [f64; 2],
+    s: &Sampling,
+) -> Option<([f64; 2], [f64; 2], bool)> {
+    let (tip, mut far) = t.segment(pose, e);
+    if e == RED {
+        let red = &t.edges[RED];
+        let dir = (red.far_tau - red.tip_tau).signum();
+        let span = (t.bend_tau - red.tip_tau).abs();
+        let tau = red.tip_tau + dir * span.min(red.length());
+        far = t.place(pose, red.point(tau));
+    }
+    let len = norm(sub(far, tip));
+    if len < MIN_CHECKED_PX {
+        return None;
+    }
+    let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
+    let reach = s.reach();
+    let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
+    let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
+    let (trim_corner, trim_far) = if e == RED {
+        (reach + 1.0, 1.0)
+    } else {
+        (reach / sin_apex + 1.0, 1.5 * reach + 2.0)
+    };
+    let pad = reach + 1.0;
+    let (a, b) = clip_to_rect(
+        tip,
+        dir,
+        [pad, pad],
+        [size[0] - 1.0 - pad, size[1] - 1.0 - pad],
+    )?;
+    let (a0, b0) = (a.max(trim_corner), b.min(len - trim_far));
+    if b0 - a0 < MIN_CHECKED_PX {
+        return None;
+    }
+    let at = |d: f64| [tip[0] + d * dir[0], tip[1] + d * dir[1]];
+    Some((at(a0), at(b0), a <= trim_corner))
+}
+
+/// Samples the step across `line` at [`STATIONS`] stations from `a` to `b`.
+pub fn profile(
+    frame: &GrayImage,
+    line: &Line,
+    (a, b): ([f64; 2], [f64; 2]),
+    partner: Option<&Line>,
+    s: &Sampling,
+    calibrated: f64,
+) -> Profile {
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    let len = norm(sub(b, a));
+    let dir = if len > 0.0 {
+        [(b[0] - a[0]) / len, (b[1] - a[1]) / len]
+    } else {
+        [0.0, 0.0]
+    };
+    let n = line.normal;
+    let half = (0.5 * len / STATIONS as f64).min(STATION_HALF_PX);
+    let along = half.floor() as i64;
+    let cal = if calibrated.abs() < 1.0 {
+        calibrated.signum()
+    } else {
+        calibrated
+    };
+    let pixel = |p: [f64; 2]| -> Option<f64> {
+        let (x, y) = (p[0].round() as i64, p[1].round() as i64);
+        (x >= 0 && y >= 0 && x < w && y < h).then(|| frame.get_pixel(x as u32, y as u32)[0] as f64)
+    };
+    let mut out = Profile {
+        stations: 0,
+        ratio: [0.0; STATIONS],
+        inside: [0.0; STATIONS],
+        step: cal,
+        corner_in_view: false,
+    };
+    let depths_in = s.inside_px.round() as i64;
+    let depths_out = s.outside_px.round() as i64;
+    for k in 0..STATIONS {
+        let c = (k as f64 + 0.5) / STATIONS as f64 * len;
+        let centre = line.foot([a[0] + c * dir[0], a[1] + c * dir[1]]);
+        let (mut sum_in, mut n_in, mut sum_out, mut n_out) = (0.0, 0usize, 0.0, 0usize);
+        for j in -along..=along {
+            let q = [centre[0] + j as f64 * dir[0], centre[1] + j as f64 * dir[1]];
+            for d in 0..=depths_in {
+                let depth = s.margin_px + d as f64;
+                let p = [q[0] + depth * n[0], q[1] + depth * n[1]];
+                if partner.is_some_and(|l| l.depth(p) < s.margin_px) {
+                    continue;
+                }
+                if let Some(v) = pixel(p) {
+                    sum_in += v;
+                    n_in += 1;
+                }
+            }
+            for d in 0..=depths_out {
+                let depth = s.margin_px + d as f64;
+                if let Some(v) = pixel([q[0] - depth * n[0], q[1] - depth * n[1]]) {
+                    sum_out += v;
+                    n_out += 1;
+                }
+            }
+        }
+        if n_in == 0 || n_out == 0 {
+            continue;
+        }
+        let (inside, outside) = (sum_in / n_in as f64, sum_out / n_out as f64);
+        out.ratio[out.stations] = (inside - outside) / cal;
+        out.inside[out.stations] = inside;
+        out.stations += 1;
+    }
+    out
+}
+
+/// The stations' verdict on a placed tip: each edge the pose puts in view, then one
+/// level on the probe's side of them all. `calibrated` are the edges' signed steps.
+pub fn check_edges(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    blur_px: f64,
+    calibrated: &[f64; 3],
+    red_fitted: bool,
+) -> Option<Miss> {
+    let size = [frame.width() as f64, frame.height() as f64];
+    let red = t.line(pose, RED);
+    let back_base = t.segment(pose, BLUE).1;
+    let beam_px = red.depth(back_base).abs();
+    let s = Sampling::new(blur_px, beam_px);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    // Faces whose corner (the apex) is in view, and of those the ones not shown there.
+    let (mut corners, mut hidden) = (0, 0);
+    for e in [RED, BLUE, GREEN] {
+        let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
+            continue;
+        };
+        if e == RED && !corner {
+            continue;
+        }
+        let partner = match e {
+            BLUE => Some(t.line(pose, GREEN)),
+            GREEN => Some(t.line(pose, BLUE)),
+            _ => None,
+        };
+        let line = t.line(pose, e);
+        let mut p = profile(frame, &line, (a, b), partner.as_ref(), &s, calibrated[e]);
+        if e == RED && !red_fitted {
+            // Left out of the fit: where is it, within the scale's slack? It must be
+            // found there, as the faces are, unless that slack reaches out of the
+            // frame (a beam along the border may lie just beyond it).
+            let slack = (RED_SLACK * line.depth(pose.apex).abs()).ceil() as i64;
+            let pad = s.reach() + 1.0;
+            let inside = |p: [f64; 2]| {
+                p[0] >= pad
+                    && p[1] >= pad
+                    && p[0] <= size[0] - 1.0 - pad
+                    && p[1] <= size[1] - 1.0 - pad
+            };
+            let shifted =
+                |p: [f64; 2], k: f64| [p[0] + k * line.normal[0], p[1] + k * line.normal[1]];
+            let sure = [-1.0, 1.0].iter().all(|&sign| {
+                let k = sign * slack as f64;
+                inside(shifted(a, k)) && inside(shifted(b, k))
+            });
+            for k in -slack..=slack {
+                let moved = Line {
+                    rho: line.rho + k as f64,
+                    ..line
+                };
+                let q = profile(frame, &moved, (a, b), None, &s, calibrated[e]);
+                if q.stations == STATIONS && q.step_ratio() > p.step_ratio() {
+                    p = q;
+                }
+            }
+            if p.step_ratio() <= -HOLD_RATIO {
+                return Some(Miss::WrongAppearance(Edge::Red));
+            }
+            // Found along its length, not necessarily at its corner: a beam edge the
+            // fit could not use is faint, and its corner the first to fade.
+            p.corner_in_view = false;
+            if let (true, Some(miss)) = (sure, p.refusal(Edge::Red)) {
+                return Some(miss);
+            }
+            continue;
+        }
+        p.corner_in_view = corner;
+        if let Some(miss) = p.refusal(Edge::ALL[e]) {
+            return Some(miss);
+        }
+        if e != RED && corner {
+            corners += 1;
+            hidden += usize::from(!p.corner_held());
+            if !p.corner_held() && !p.corner_inside_probe() {
+                return Some(Miss::EdgeMissing(Edge::ALL[e]));
+            }
+        }
+        let level = p.inside_level();
+        (lo, hi) = (lo.min(level), hi.max(level));
+    }
+    // The tip is hidden when no face shows it at the apex; one face may lose its
+    // corner to a particle or a bright substrate beside it while the other holds.
+    if corners > 0 && hidden == corners {
+        return Some(Miss::EdgeMissing(Edge::Blue));
+    }
+    if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
+        return Some(Miss::WrongAppearance(Edge::Red));
+    }
+    None
+}
