@@ -187,7 +187,8 @@ impl Calibration {
                 });
             }
         }
-        let template = build_template(&lines, &coarse)?;
+        let mut template = build_template(&lines, &coarse)?;
+        template.beam_px = beam_thickness(reference, &template, contrast[RED], blur);
         let grey_mask = masked
             && (0..3).all(|e| {
                 level[e] + contrast[e] - f64::from(threshold) >= MASK_MARGIN * contrast[e]
@@ -231,6 +232,13 @@ impl Calibration {
         (self.edges[BLUE].contrast + self.edges[GREEN].contrast).signum()
     }
 
+    /// The beam's thickness behind the pyramid measured on the reference (the depth
+    /// of its lower face below the red line), pixels; `None` where it was not
+    /// measured.
+    pub fn beam_px(&self) -> Option<f64> {
+        self.template.beam_px
+    }
+
     /// The calibrated edge.
     pub fn edge(&self, edge: Edge) -> &CalibratedEdge {
         &self.edges[edge.index()]
@@ -254,6 +262,88 @@ impl Calibration {
     pub(crate) fn template(&self) -> &Template {
         &self.template
     }
+}
+
+/// Profiles across the beam measured for its thickness.
+const BEAM_PROFILES: usize = 16;
+/// The lower face must step by at least this share of the red edge's contrast.
+const BEAM_STEP_SHARE: f64 = 0.4;
+/// Share of the profiles that must agree on the lower face, within
+/// [`BEAM_AGREE_PX`] of their median.
+const BEAM_AGREE_SHARE: f64 = 0.6;
+const BEAM_AGREE_PX: f64 = 1.5;
+
+/// The depth of the beam's lower face below the red line behind the pyramid, reference
+/// pixels: on profiles across the beam from the back face's base towards the clamp
+/// (one tip height of it), the first depth where the grey level steps from the
+/// probe's to the surroundings' by a good share of red's contrast. `None` when that
+/// stretch is out of the reference or the profiles do not agree.
+fn beam_thickness(
+    reference: &GrayImage,
+    t: &Template,
+    red_contrast: f64,
+    blur: f64,
+) -> Option<f64> {
+    let red = &t.edges[RED];
+    let n = red.normal;
+    let toward_clamp = scale(along(n), (red.far_tau - red.tip_tau).signum());
+    let base = add(t.apex, t.edges[BLUE].point(t.edges[BLUE].far_tau));
+    let red_line_point = add(t.apex, red.point(red.tip_tau));
+    let depth_of = |p: [f64; 2]| dot(n, sub(p, red_line_point));
+    let start_depth = depth_of(base);
+    let (w, h) = (reference.width() as f64, reference.height() as f64);
+    let value = |p: [f64; 2]| -> Option<f64> {
+        let (x, y) = (p[0].round(), p[1].round());
+        (x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0)
+            .then(|| f64::from(reference.get_pixel(x as u32, y as u32)[0]))
+    };
+    let k = (1.5 * blur).ceil().max(1.0);
+    let max_depth = 0.9 * t.height;
+    let mut found = [0.0; BEAM_PROFILES];
+    let mut m = 0;
+    for j in 0..BEAM_PROFILES {
+        let s = 2.0 * k + 2.0 + t.height * j as f64 / BEAM_PROFILES as f64;
+        // A point on the red line level with this stretch of beam.
+        let top = add(sub(base, scale(n, start_depth)), scale(toward_clamp, s));
+        let at = |d: f64| add(top, scale(n, d));
+        let mut d = k + 1.0;
+        while d + k <= max_depth {
+            let (Some(a), Some(b)) = (value(at(d - k)), value(at(d + k))) else {
+                break;
+            };
+            // Probe side (towards red) minus far side, with red's sign.
+            let step = (a - b) * red_contrast.signum();
+            if step >= BEAM_STEP_SHARE * red_contrast.abs() {
+                // Refine to the steepest point of this step.
+                let mut best = (step, d);
+                let mut e = d + 0.5;
+                while e <= d + 2.0 * k {
+                    if let (Some(a), Some(b)) = (value(at(e - k)), value(at(e + k))) {
+                        let st = (a - b) * red_contrast.signum();
+                        if st > best.0 {
+                            best = (st, e);
+                        }
+                    }
+                    e += 0.5;
+                }
+                found[m] = best.1;
+                m += 1;
+                break;
+            }
+            d += 0.5;
+        }
+    }
+    if (m as f64) < BEAM_AGREE_SHARE * BEAM_PROFILES as f64 {
+        return None;
+    }
+    let mut sorted = found;
+    sorted[..m].sort_unstable_by(f64::total_cmp);
+    let median = sorted[m / 2];
+    let agree = found[..m]
+        .iter()
+        .filter(|&&d| (d - median).abs() <= BEAM_AGREE_PX)
+        .count();
+    ((agree as f64) >= BEAM_AGREE_SHARE * BEAM_PROFILES as f64).then_some(median)
 }
 
 /// What each edge's own grey-level fit found on the reference.
@@ -701,6 +791,7 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         apex,
         height,
         bend_tau,
+        beam_px: None,
     })
 }
 

@@ -418,5 +418,79 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red));
     }
+    if !red_fitted {
+        return None;
+    }
+    lower_face(frame, t, pose, &s, calibrated[RED])
+}
+
+/// How far behind the back face's base the lower face is checked, in tip heights:
+/// beyond, the bending beam leaves the straight line by pixels at high magnification.
+const LOWER_FACE_HEIGHTS: f64 = 0.3;
+
+/// The beam's lower face behind the pyramid, where calibration measured the beam's
+/// thickness: parallel to the beam edge, that thickness below it, from the back face's
+/// base towards the clamp for [`LOWER_FACE_HEIGHTS`] tip heights. A beam of another thickness has the
+/// surroundings (thinner) or the beam (thicker) on both sides of it there: refused as
+/// `Miss::ScaleMismatch` when more than 3 of its stations show nothing. Checked only
+/// when the fit measured the beam edge (placed from the faces alone, the beam edge's
+/// distance is known to a few per cent, pixels at high magnification); not checked
+/// where the beam is too thin at this scale for both sample runs, or too little of
+/// that stretch is in view.
+fn lower_face(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    s: &Sampling,
+    red_step: f64,
+) -> Option<Miss> {
+    let beam_px = t.beam_px? * pose.scale;
+    if beam_px < 2.0 * s.margin_px + 2.0 {
+        return None;
+    }
+    let red = t.line(pose, RED);
+    let (tip, far) = t.segment(pose, RED);
+    let len = norm(sub(far, tip));
+    if len < 1e-9 {
+        return None;
+    }
+    let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
+    let base = t.segment(pose, BLUE).1;
+    // The base's foot on the lower face.
+    let drop = beam_px - red.depth(base);
+    let foot = [
+        base[0] + drop * red.normal[0],
+        base[1] + drop * red.normal[1],
+    ];
+    let normal = [-red.normal[0], -red.normal[1]];
+    let line = Line {
+        normal,
+        rho: normal[0] * foot[0] + normal[1] * foot[1],
+    };
+    let sampling = Sampling {
+        inside_px: (beam_px - 2.0 * s.margin_px).clamp(1.0, 3.0),
+        ..*s
+    };
+    let pad = sampling.reach() + 1.0;
+    let size = [frame.width() as f64, frame.height() as f64];
+    let (a, b) = clip_to_rect(
+        foot,
+        dir,
+        [pad, pad],
+        [size[0] - 1.0 - pad, size[1] - 1.0 - pad],
+    )?;
+    let (a0, b0) = (
+        a.max(pad),
+        b.min(LOWER_FACE_HEIGHTS * pose.scale * t.height),
+    );
+    if b0 - a0 < MIN_CHECKED_PX {
+        return None;
+    }
+    let at = |d: f64| [foot[0] + d * dir[0], foot[1] + d * dir[1]];
+    let p = profile(frame, &line, (at(a0), at(b0)), None, &sampling, red_step);
+    let missing = (0..p.stations).filter(|&k| !p.held(k)).count();
+    if p.stations < STATIONS || (missing as f64) > (1.0 - HELD_SHARE) * STATIONS as f64 {
+        return Some(Miss::ScaleMismatch);
+    }
     None
 }

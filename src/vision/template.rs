@@ -63,6 +63,9 @@ pub struct Template {
     /// Position along red (as `tau`) of the back of the pyramid's base: the beam is
     /// rigid (straight) from there to the free end, and bends beyond.
     pub bend_tau: f64,
+    /// The beam's thickness behind the pyramid: the depth of its lower face below the
+    /// red line, reference pixels, where calibration measured it.
+    pub beam_px: Option<f64>,
 }
 
 /// Where the template sits in a frame.
@@ -161,6 +164,7 @@ mod tests {
             apex: [100.0, 100.0],
             height: 50.0,
             bend_tau: 20.0,
+            beam_px: None,
         }
     }
 
