@@ -208,6 +208,17 @@ impl Profile {
     }
 }
 
+/// Where the line from `origin` along `dir` runs at least `pad` pixels inside a frame
+/// of `size`: its interval of distances along `dir`.
+fn clip_inside(origin: [f64; 2], dir: [f64; 2], size: [f64; 2], pad: f64) -> Option<(f64, f64)> {
+    clip_to_rect(
+        origin,
+        dir,
+        [pad, pad],
+        [size[0] - 1.0 - pad, size[1] - 1.0 - pad],
+    )
+}
+
 /// The stretch of edge `e` the stations cover, with whether its corner end is in view.
 fn station_span(
     t: &Template,
@@ -237,13 +248,7 @@ fn station_span(
     } else {
         (reach / sin_apex + 1.0, 1.5 * reach + 2.0)
     };
-    let pad = reach + 1.0;
-    let (a, b) = clip_to_rect(
-        tip,
-        dir,
-        [pad, pad],
-        [size[0] - 1.0 - pad, size[1] - 1.0 - pad],
-    )?;
+    let (a, b) = clip_inside(tip, dir, size, reach + 1.0)?;
     let (a0, b0) = (a.max(trim_corner), b.min(len - trim_far));
     if b0 - a0 < MIN_CHECKED_PX {
         return None;
@@ -473,12 +478,7 @@ fn lower_face(
     };
     let pad = sampling.reach() + 1.0;
     let size = [frame.width() as f64, frame.height() as f64];
-    let (a, b) = clip_to_rect(
-        foot,
-        dir,
-        [pad, pad],
-        [size[0] - 1.0 - pad, size[1] - 1.0 - pad],
-    )?;
+    let (a, b) = clip_inside(foot, dir, size, pad)?;
     let (a0, b0) = (
         a.max(pad),
         b.min(LOWER_FACE_HEIGHTS * pose.scale * t.height),
