@@ -135,8 +135,13 @@ impl Profile {
     /// probe; darker for a darker one) than the probe while its inside has the probe's
     /// level: a particle or substrate beside the edge, not a missing edge.
     fn covered(&self, k: usize, probe_level: f64) -> bool {
-        self.ratio[k] <= -HOLD_RATIO
-            && (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs()
+        self.ratio[k] <= -HOLD_RATIO && self.at_probe_level(k, probe_level)
+    }
+
+    /// Whether station `k`'s inside lies within [`COVERED_LEVEL`] of the calibrated
+    /// step of `probe_level`.
+    fn at_probe_level(&self, k: usize, probe_level: f64) -> bool {
+        (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs()
     }
 
     /// Whether the stations at the corner end show the edge: all but one of
@@ -151,8 +156,7 @@ impl Profile {
     /// over the tip).
     pub fn corner_inside_probe(&self) -> bool {
         let probe_level = self.held_level();
-        (0..END_STATIONS)
-            .all(|k| (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs())
+        (0..END_STATIONS).all(|k| self.at_probe_level(k, probe_level))
     }
 
     /// Median level on the probe's side over the stations that show the edge.
@@ -179,15 +183,7 @@ impl Profile {
         if ratio <= -HOLD_RATIO {
             return Some(Miss::WrongAppearance(edge));
         }
-        let mut held_inside = [0.0; STATIONS];
-        let mut m = 0;
-        for k in 0..n {
-            if self.held(k) {
-                held_inside[m] = self.inside[k];
-                m += 1;
-            }
-        }
-        let probe_level = median(&held_inside, m.max(1));
+        let probe_level = self.held_level();
         let missing = |range: std::ops::Range<usize>| {
             range
                 .filter(|&k| !self.held(k) && !self.covered(k, probe_level))
@@ -406,9 +402,10 @@ pub fn check_edges(
             return Some(miss);
         }
         if e != RED && corner {
+            let held = p.corner_held();
             corners += 1;
-            hidden += usize::from(!p.corner_held());
-            if !p.corner_held() && !p.corner_inside_probe() {
+            hidden += usize::from(!held);
+            if !held && !p.corner_inside_probe() {
                 return Some(Miss::EdgeMissing(Edge::ALL[e]));
             }
         }
