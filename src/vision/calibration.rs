@@ -268,16 +268,20 @@ impl Calibration {
 const BEAM_PROFILES: usize = 16;
 /// The lower face must step by at least this share of the red edge's contrast.
 const BEAM_STEP_SHARE: f64 = 0.4;
-/// Share of the profiles that must agree on the lower face, within
+/// Share of the profiles in view that must agree on the lower face, within
 /// [`BEAM_AGREE_PX`] of their median.
 const BEAM_AGREE_SHARE: f64 = 0.6;
+/// Fewest profiles in view for a measurement: a quarter of them.
+const BEAM_MIN_PROFILES: usize = BEAM_PROFILES / 4;
 const BEAM_AGREE_PX: f64 = 1.5;
 
 /// The depth of the beam's lower face below the red line behind the pyramid, reference
 /// pixels: on profiles across the beam from the back face's base towards the clamp
 /// (one tip height of it), the first depth where the grey level steps from the
-/// probe's to the surroundings' by a good share of red's contrast. `None` when that
-/// stretch is out of the reference or the profiles do not agree.
+/// probe's to the surroundings' by a good share of red's contrast. A profile that
+/// leaves the reference before finding that step is out of view and not counted (a
+/// beam running out of a frame's side). `None` when fewer than a quarter of them are
+/// in view or those in view do not agree.
 fn beam_thickness(
     reference: &GrayImage,
     t: &Template,
@@ -300,15 +304,18 @@ fn beam_thickness(
     let k = (1.5 * blur).ceil().max(1.0);
     let max_depth = 0.9 * t.height;
     let mut found = [0.0; BEAM_PROFILES];
-    let mut m = 0;
+    let (mut m, mut in_view) = (0, 0);
     for j in 0..BEAM_PROFILES {
         let s = 2.0 * k + 2.0 + t.height * j as f64 / BEAM_PROFILES as f64;
         // A point on the red line level with this stretch of beam.
         let top = add(sub(base, scale(n, start_depth)), scale(toward_clamp, s));
         let at = |d: f64| add(top, scale(n, d));
         let mut d = k + 1.0;
+        // Whether the whole search stays in the reference.
+        let mut seen = true;
         while d + k <= max_depth {
             let (Some(a), Some(b)) = (value(at(d - k)), value(at(d + k))) else {
+                seen = false;
                 break;
             };
             // Probe side (towards red) minus far side, with red's sign.
@@ -332,8 +339,10 @@ fn beam_thickness(
             }
             d += 0.5;
         }
+        in_view += usize::from(seen);
     }
-    if (m as f64) < BEAM_AGREE_SHARE * BEAM_PROFILES as f64 {
+    let needed = BEAM_AGREE_SHARE * in_view as f64;
+    if in_view < BEAM_MIN_PROFILES || (m as f64) < needed {
         return None;
     }
     let mut sorted = found;
@@ -343,7 +352,7 @@ fn beam_thickness(
         .iter()
         .filter(|&&d| (d - median).abs() <= BEAM_AGREE_PX)
         .count();
-    ((agree as f64) >= BEAM_AGREE_SHARE * BEAM_PROFILES as f64).then_some(median)
+    ((agree as f64) >= needed).then_some(median)
 }
 
 /// What each edge's own grey-level fit found on the reference.

@@ -344,6 +344,9 @@ pub fn check_edges(
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     // Faces whose corner (the apex) is in view, and of those the ones not shown there.
     let (mut corners, mut hidden) = (0, 0);
+    // The beam edge where the frame shows it: the fitted line, or the one found
+    // within the slack when the fit left it out.
+    let mut beam_edge = red_fitted.then_some(red);
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -376,6 +379,7 @@ pub fn check_edges(
                 let k = sign * slack as f64;
                 inside(shifted(a, k)) && inside(shifted(b, k))
             });
+            let mut found = line;
             for k in -slack..=slack {
                 let moved = Line {
                     rho: line.rho + k as f64,
@@ -384,6 +388,7 @@ pub fn check_edges(
                 let q = profile(frame, &moved, (a, b), None, &s, calibrated[e]);
                 if q.stations == STATIONS && q.step_ratio() > p.step_ratio() {
                     p = q;
+                    found = moved;
                 }
             }
             if p.step_ratio() <= -HOLD_RATIO {
@@ -392,8 +397,11 @@ pub fn check_edges(
             // Found along its length, not necessarily at its corner: a beam edge the
             // fit could not use is faint, and its corner the first to fade.
             p.corner_in_view = false;
-            if let (true, Some(miss)) = (sure, p.refusal(Edge::Red)) {
-                return Some(miss);
+            match (sure, p.refusal(Edge::Red)) {
+                (true, Some(miss)) => return Some(miss),
+                // Found with the whole slack in view: the beam edge is there.
+                (true, None) => beam_edge = Some(found),
+                (false, _) => {}
             }
             continue;
         }
@@ -420,10 +428,8 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red));
     }
-    if !red_fitted {
-        return None;
-    }
-    lower_face(frame, t, pose, &s, calibrated[RED])
+    let beam_edge = beam_edge?;
+    lower_face(frame, t, pose, &beam_edge, &s, calibrated[RED])
 }
 
 /// How far behind the back face's base the lower face is checked, in tip heights:
@@ -434,15 +440,18 @@ const LOWER_FACE_HEIGHTS: f64 = 0.3;
 /// thickness: parallel to the beam edge, that thickness below it, from the back face's
 /// base towards the clamp for [`LOWER_FACE_HEIGHTS`] tip heights. A beam of another thickness has the
 /// surroundings (thinner) or the beam (thicker) on both sides of it there: refused as
-/// `Miss::ScaleMismatch` when more than 3 of its stations show nothing. Checked only
-/// when the fit measured the beam edge (placed from the faces alone, the beam edge's
-/// distance is known to a few per cent, pixels at high magnification); not checked
+/// `Miss::ScaleMismatch` when more than 3 of its stations show nothing. Measured from
+/// `red`, the beam edge where the frame shows it: fitted, or found within the slack
+/// with all of that slack in view when the fit left it out (placed from the faces
+/// alone, its distance is known to a few per cent, pixels at high magnification, and
+/// one found where the slack leaves the frame may be another line); not checked
 /// where the beam is too thin at this scale for both sample runs, or too little of
 /// that stretch is in view.
 fn lower_face(
     frame: &GrayImage,
     t: &Template,
     pose: &Pose,
+    red: &Line,
     s: &Sampling,
     red_step: f64,
 ) -> Option<Miss> {
@@ -450,7 +459,6 @@ fn lower_face(
     if beam_px < 2.0 * s.margin_px + 2.0 {
         return None;
     }
-    let red = t.line(pose, RED);
     let (tip, far) = t.segment(pose, RED);
     let len = norm(sub(far, tip));
     if len < 1e-9 {
