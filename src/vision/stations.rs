@@ -25,7 +25,7 @@
 
 use image::GrayImage;
 
-use super::geometry::{clip_to_rect, norm, sub, Line};
+use super::geometry::{add, clip_to_rect, dot, norm, scale, sub, Line};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::{Edge, Miss};
 
@@ -102,7 +102,7 @@ pub struct Profile {
 }
 
 /// Median of the first `n` values (n >= 1), without allocating.
-fn median(v: &[f64; STATIONS], n: usize) -> f64 {
+fn median<const N: usize>(v: &[f64; N], n: usize) -> f64 {
     let mut s = *v;
     s[..n].sort_unstable_by(f64::total_cmp);
     if n % 2 == 1 {
@@ -253,6 +253,9 @@ fn station_span(
     Some((at(a0), at(b0), a <= trim_corner))
 }
 
+/// A stretch of an edge checked by stations: its two ends, frame pixels.
+type Span = ([f64; 2], [f64; 2]);
+
 /// Samples the step across `line` at [`STATIONS`] stations from `a` to `b`.
 pub fn profile(
     frame: &GrayImage,
@@ -327,14 +330,15 @@ pub fn profile(
 }
 
 /// The stations' verdict on a placed tip: each edge the pose puts in view, then one
-/// level on the probe's side of them all. `calibrated` are the edges' signed steps.
+/// level on the probe's side of them all. `calibrated` are the edges' signed steps,
+/// `fitted` which edges the grey-level fit placed.
 pub fn check_edges(
     frame: &GrayImage,
     t: &Template,
     pose: &Pose,
     blur_px: f64,
     calibrated: &[f64; 3],
-    red_fitted: bool,
+    fitted: [bool; 3],
 ) -> Option<Miss> {
     let size = [frame.width() as f64, frame.height() as f64];
     let red = t.line(pose, RED);
@@ -346,7 +350,9 @@ pub fn check_edges(
     let (mut corners, mut hidden) = (0, 0);
     // The beam edge where the frame shows it: the fitted line, or the one found
     // within the slack when the fit left it out.
-    let mut beam_edge = red_fitted.then_some(red);
+    let mut beam_edge = fitted[RED].then_some(red);
+    // The faces left out of the fit whose corner is in view, for the turned-face check.
+    let mut unfitted_faces: [Option<(Span, Profile)>; 3] = [None; 3];
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -361,7 +367,7 @@ pub fn check_edges(
         };
         let line = t.line(pose, e);
         let mut p = profile(frame, &line, (a, b), partner.as_ref(), &s, calibrated[e]);
-        if e == RED && !red_fitted {
+        if e == RED && !fitted[RED] {
             // Left out of the fit: where is it, within the scale's slack? It must be
             // found there, as the faces are, unless that slack reaches out of the
             // frame (a beam along the border may lie just beyond it).
@@ -409,6 +415,9 @@ pub fn check_edges(
         if let Some(miss) = p.refusal(Edge::ALL[e]) {
             return Some(miss);
         }
+        if e != RED && corner && !fitted[e] {
+            unfitted_faces[e] = Some(((a, b), p));
+        }
         if e != RED && corner {
             let held = p.corner_held();
             corners += 1;
@@ -428,8 +437,201 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red));
     }
-    let beam_edge = beam_edge?;
-    lower_face(frame, t, pose, &beam_edge, &s, calibrated[RED])
+    if let Some(miss) =
+        beam_edge.and_then(|red| lower_face(frame, t, pose, &red, &s, calibrated[RED]))
+    {
+        return Some(miss);
+    }
+    // Last, as the dearest: a face the frame shows turned from its prediction.
+    for (e, face) in unfitted_faces.iter().enumerate() {
+        if let Some((span, p)) = face {
+            let partner = t.line(pose, if e == BLUE { GREEN } else { BLUE });
+            if turned_face(frame, &t.line(pose, e), *span, Some(&partner), &s, p) {
+                return Some(Miss::EdgeMissing(Edge::ALL[e]));
+            }
+        }
+    }
+    None
+}
+
+/// How far either way of the predicted face its step is looked for, pixels.
+const FACE_SEARCH_PX: i64 = 12;
+/// A station locates the face's step where its ratio reaches this.
+const LOCATED_RATIO: f64 = 0.5;
+/// Steps located along a face that run off its predicted line by at least this angle
+/// belong to a face of another angle, degrees. Located to the pixel, the steps of a
+/// probe's own face, under noise, a textured background or a pose a pixel off, run
+/// off by up to 5 deg on the real-background suites; a face 10 deg or more off the
+/// probe's is placed with the difference split between it and its partner.
+const FACE_TURN_DEG: f64 = 6.0;
+/// Most median distance of the located steps from their own line, pixels.
+const FACE_LINE_PX: f64 = 1.0;
+/// The turned line must show this many more stations' worth of the calibrated step
+/// than the predicted one (each station's ratio counted between 0 and 1).
+const TURNED_GAIN: f64 = 2.0;
+
+/// Longest cross-section [`locate_steps`] reads, pixels.
+const SECTION_MAX: usize = 64;
+
+/// Per station of `line` from `a` to `b`: the largest step ratio within
+/// [`FACE_SEARCH_PX`] of the line and its offset along the normal (pixels). Each
+/// station reads one cross-section, averaged along the edge as [`profile`] does, and
+/// slides the sample runs along it.
+fn locate_steps(
+    frame: &GrayImage,
+    line: &Line,
+    (a, b): ([f64; 2], [f64; 2]),
+    s: &Sampling,
+    step: f64,
+) -> [(f64, f64); STATIONS] {
+    let mut best = [(f64::NEG_INFINITY, 0.0); STATIONS];
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    let len = norm(sub(b, a));
+    if len <= 0.0 {
+        return best;
+    }
+    let dir = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
+    let n = line.normal;
+    let along = (0.5 * len / STATIONS as f64).min(STATION_HALF_PX).floor() as i64;
+    let margin = s.margin_px.round() as i64;
+    let (din, dout) = (s.inside_px.round() as i64, s.outside_px.round() as i64);
+    let reach = margin + din.max(dout);
+    let half = FACE_SEARCH_PX + reach;
+    let width = (2 * half + 1) as usize;
+    if width > SECTION_MAX {
+        return best;
+    }
+    let cal = if step.abs() < 1.0 {
+        step.signum()
+    } else {
+        step
+    };
+    for (k, station) in best.iter_mut().enumerate() {
+        let c = (k as f64 + 0.5) / STATIONS as f64 * len;
+        let centre = line.foot([a[0] + c * dir[0], a[1] + c * dir[1]]);
+        // Mean grey level at each depth along the normal (NaN where none is in view).
+        let mut section = [f64::NAN; SECTION_MAX];
+        for (i, v) in section[..width].iter_mut().enumerate() {
+            let depth = (i as i64 - half) as f64;
+            let (mut sum, mut count) = (0.0, 0usize);
+            for j in -along..=along {
+                let x = (centre[0] + j as f64 * dir[0] + depth * n[0]).round() as i64;
+                let y = (centre[1] + j as f64 * dir[1] + depth * n[1]).round() as i64;
+                if x >= 0 && y >= 0 && x < w && y < h {
+                    sum += f64::from(frame.get_pixel(x as u32, y as u32)[0]);
+                    count += 1;
+                }
+            }
+            if count > 0 {
+                *v = sum / count as f64;
+            }
+        }
+        let mean = |from: i64, to: i64| -> f64 {
+            let run = &section[(from + half) as usize..=(to + half) as usize];
+            run.iter().sum::<f64>() / run.len() as f64
+        };
+        for shift in -FACE_SEARCH_PX..=FACE_SEARCH_PX {
+            let inside = mean(shift + margin, shift + margin + din);
+            let outside = mean(shift - margin - dout, shift - margin);
+            let ratio = (inside - outside) / cal;
+            if ratio > station.0 {
+                *station = (ratio, shift as f64);
+            }
+        }
+    }
+    best
+}
+
+/// How much of the calibrated step a profile shows, in stations: each station's ratio
+/// clamped to 0..1, summed.
+fn shown(p: &Profile) -> f64 {
+    p.ratio[..p.stations]
+        .iter()
+        .map(|r| r.clamp(0.0, 1.0))
+        .sum()
+}
+
+/// Whether the face predicted on `line` (stations from `a` to `b`) is in the frame a
+/// straight step turned from it by [`FACE_TURN_DEG`] or more: a pyramid of other face
+/// angles, placed where its other edges fit. Such a face crosses the predicted line,
+/// so its stations fade toward both ends, which the per-station threshold alone lets
+/// pass. Each station locates the step within [`FACE_SEARCH_PX`] of the prediction;
+/// the located steps are that face when at least [`HELD_SHARE`] of the stations
+/// locate one, they lie on one line within [`FACE_LINE_PX`], that line is turned, and
+/// it shows [`TURNED_GAIN`] stations' worth more of the step than the predicted one.
+/// Looked at for a face the fit left out (a face the fit placed is where its own grey
+/// levels put it) and only when the predicted face leaves room for that gain.
+fn turned_face(
+    frame: &GrayImage,
+    line: &Line,
+    (a, b): ([f64; 2], [f64; 2]),
+    partner: Option<&Line>,
+    s: &Sampling,
+    predicted: &Profile,
+) -> bool {
+    if shown(predicted) + TURNED_GAIN > STATIONS as f64 {
+        return false;
+    }
+    let len = norm(sub(b, a));
+    let best = locate_steps(frame, line, (a, b), s, predicted.step);
+    // (position along the face, offset of the located step), pixels.
+    let mut located = [[0.0; 2]; STATIONS];
+    let mut n = 0;
+    for (i, &(r, k)) in best.iter().enumerate() {
+        if r >= LOCATED_RATIO {
+            located[n] = [(i as f64 + 0.5) / STATIONS as f64 * len, k];
+            n += 1;
+        }
+    }
+    if (n as f64) < HELD_SHARE * STATIONS as f64 {
+        return false;
+    }
+    // Theil-Sen: the median of the pairwise slopes, then the median intercept.
+    let mut slopes = [0.0; STATIONS * (STATIONS - 1) / 2];
+    let mut m = 0;
+    for i in 0..n {
+        for j in i + 1..n {
+            let dx = located[j][0] - located[i][0];
+            if dx > 0.0 {
+                slopes[m] = (located[j][1] - located[i][1]) / dx;
+                m += 1;
+            }
+        }
+    }
+    if m == 0 {
+        return false;
+    }
+    let slope = median(&slopes, m);
+    let mut intercepts = [0.0; STATIONS];
+    for (c, p) in intercepts.iter_mut().zip(&located[..n]) {
+        *c = p[1] - slope * p[0];
+    }
+    let intercept = median(&intercepts, n);
+    let mut misfit = [0.0; STATIONS];
+    for (d, p) in misfit.iter_mut().zip(&located[..n]) {
+        *d = (p[1] - intercept - slope * p[0]).abs();
+    }
+    if slope.atan().abs() < FACE_TURN_DEG.to_radians() || median(&misfit, n) > FACE_LINE_PX {
+        return false;
+    }
+    // That line must show the face: two stations' worth more of the step than the
+    // predicted one.
+    let n0 = line.normal;
+    let (fa, fb) = (line.foot(a), line.foot(b));
+    let a1 = add(fa, scale(n0, intercept));
+    let b1 = add(fb, scale(n0, intercept + slope * len));
+    let d = sub(b1, a1);
+    let dl = norm(d);
+    if dl < 1e-9 {
+        return false;
+    }
+    let mut normal = [-d[1] / dl, d[0] / dl];
+    if dot(normal, n0) < 0.0 {
+        normal = [-normal[0], -normal[1]];
+    }
+    let turned = Line::through(a1, normal);
+    let q = profile(frame, &turned, (a1, b1), partner, s, predicted.step);
+    q.stations == STATIONS && shown(&q) >= shown(predicted) + TURNED_GAIN
 }
 
 /// How far behind the back face's base the lower face is checked, in tip heights:
@@ -498,4 +700,42 @@ fn lower_face(
         return Some(Miss::ScaleMismatch);
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame bright (200) right of the vertical line x = 100, dark (50) left of it.
+    fn half_plane() -> GrayImage {
+        GrayImage::from_fn(200, 200, |x, _| {
+            image::Luma([if x > 100 { 200 } else { 50 }])
+        })
+    }
+
+    /// The line through (100, 100) whose inward normal points `deg` from +x, and its
+    /// stretch 40 px either side of that point.
+    fn predicted(deg: f64) -> (Line, ([f64; 2], [f64; 2])) {
+        let (s, c) = deg.to_radians().sin_cos();
+        let centre = [100.0, 100.0];
+        let dir = [-s, c];
+        let a = [centre[0] - 40.0 * dir[0], centre[1] - 40.0 * dir[1]];
+        let b = [centre[0] + 40.0 * dir[0], centre[1] + 40.0 * dir[1]];
+        (Line::through(centre, [c, s]), (a, b))
+    }
+
+    #[test]
+    fn a_face_turned_from_the_prediction_is_told_apart() {
+        let frame = half_plane();
+        let s = Sampling::new(1.0, 20.0);
+        for (deg, turned) in [(0.0, false), (12.0, true), (-12.0, true), (3.0, false)] {
+            let (line, span) = predicted(deg);
+            let p = profile(&frame, &line, span, None, &s, 150.0);
+            assert_eq!(
+                turned_face(&frame, &line, span, None, &s, &p),
+                turned,
+                "predicted {deg} deg off"
+            );
+        }
+    }
 }

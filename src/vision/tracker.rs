@@ -25,7 +25,7 @@ use super::options::{PixelOrigin, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::stations;
-use super::template::{Pose, Template, RED};
+use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss};
 use crate::model::Cantilever;
@@ -388,8 +388,8 @@ impl Tracker {
             return Some(Miss::RotationOutside);
         }
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
-        let red_fitted = bands[RED].is_some() && fit.edges[RED].is_some();
-        stations::check_edges(frame, t, pose, fit.blur, &calibrated, red_fitted)
+        let fitted = std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some());
+        stations::check_edges(frame, t, pose, fit.blur, &calibrated, fitted)
     }
 
     #[allow(clippy::too_many_arguments)]
