@@ -39,6 +39,8 @@ fn printed_block_calibrates_and_the_reference_reads_zero() {
             "refined {edge} orientation: {block}"
         );
     }
+    // Whether the beam's thickness was measured, and what follows when not.
+    assert!(block.contains("\n# Beam thickness"), "{block}");
     assert!(image::open(&overlay).is_ok(), "overlay written");
     let config = dir.path().join("probe.toml");
     std::fs::write(

@@ -217,6 +217,15 @@ pub fn calibration_block(
         "# Apex (blue meets green): ({:.2}, {:.2}) px\n",
         apex[0], apex[1]
     ));
+    out.push_str(&match calibration.beam_px() {
+        Some(px) => {
+            format!("# Beam thickness behind the pyramid: {px:.1} px (checked on every frame)\n")
+        }
+        None => "# Beam thickness: not measured, the reference does not show the beam behind\n\
+                 # the pyramid; a probe of another beam thickness is not told apart. Take a\n\
+                 # reference that shows it for that check.\n"
+            .to_string(),
+    });
     if origin != PixelOrigin::Centre {
         out.push_str(&format!(
             "# Pixels counted from the top-left pixel's {origin}: \
