@@ -382,8 +382,8 @@ fn coherence_is_a_shortcut_never_a_dependency() {
 fn calibration_finds_the_true_edges_and_the_reference_reads_zero() {
     // Suite 13's first session: a large pyramid under a beam that leaves the frame at
     // the top close behind the apex, so the frame border cuts the beam's upper face
-    // nearer the apex's foot than its free end is (it once failed to calibrate, taking
-    // the cut for the free end and then blue and green for swapped).
+    // nearer the apex's foot than its free end is: taking the cut for the free end
+    // would swap blue and green.
     let mut sessions = scene::suite(33, 6, 1);
     sessions.push(scene::suite(13, 1, 1).remove(0));
     for (i, s) in sessions.iter().enumerate() {

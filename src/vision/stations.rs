@@ -256,6 +256,50 @@ fn station_span(
 /// A stretch of an edge checked by stations: its two ends, frame pixels.
 type Span = ([f64; 2], [f64; 2]);
 
+/// Where the [`STATIONS`] stations of a span lie: evenly along it, each averaging
+/// `along` pixels either side of its centre.
+struct Placement {
+    a: [f64; 2],
+    dir: [f64; 2],
+    len: f64,
+    along: i64,
+}
+
+impl Placement {
+    fn new((a, b): Span) -> Self {
+        let len = norm(sub(b, a));
+        let dir = if len > 0.0 {
+            [(b[0] - a[0]) / len, (b[1] - a[1]) / len]
+        } else {
+            [0.0, 0.0]
+        };
+        let along = (0.5 * len / STATIONS as f64).min(STATION_HALF_PX).floor() as i64;
+        Placement { a, dir, len, along }
+    }
+
+    /// Station `k`'s centre, on `line`.
+    fn centre(&self, line: &Line, k: usize) -> [f64; 2] {
+        let c = (k as f64 + 0.5) / STATIONS as f64 * self.len;
+        line.foot([self.a[0] + c * self.dir[0], self.a[1] + c * self.dir[1]])
+    }
+}
+
+/// The grey level of the pixel nearest `p`, if it is in the frame.
+fn grey(frame: &GrayImage, p: [f64; 2]) -> Option<f64> {
+    let (x, y) = (p[0].round() as i64, p[1].round() as i64);
+    (x >= 0 && y >= 0 && x < i64::from(frame.width()) && y < i64::from(frame.height()))
+        .then(|| f64::from(frame.get_pixel(x as u32, y as u32)[0]))
+}
+
+/// A calibrated step to divide by: a step under one grey level counts as one of its sign.
+fn unit_step(step: f64) -> f64 {
+    if step.abs() < 1.0 {
+        step.signum()
+    } else {
+        step
+    }
+}
+
 /// Samples the step across `line` at [`STATIONS`] stations from `a` to `b`.
 pub fn profile(
     frame: &GrayImage,
@@ -265,25 +309,10 @@ pub fn profile(
     s: &Sampling,
     calibrated: f64,
 ) -> Profile {
-    let (w, h) = (frame.width() as i64, frame.height() as i64);
-    let len = norm(sub(b, a));
-    let dir = if len > 0.0 {
-        [(b[0] - a[0]) / len, (b[1] - a[1]) / len]
-    } else {
-        [0.0, 0.0]
-    };
-    let n = line.normal;
-    let half = (0.5 * len / STATIONS as f64).min(STATION_HALF_PX);
-    let along = half.floor() as i64;
-    let cal = if calibrated.abs() < 1.0 {
-        calibrated.signum()
-    } else {
-        calibrated
-    };
-    let pixel = |p: [f64; 2]| -> Option<f64> {
-        let (x, y) = (p[0].round() as i64, p[1].round() as i64);
-        (x >= 0 && y >= 0 && x < w && y < h).then(|| frame.get_pixel(x as u32, y as u32)[0] as f64)
-    };
+    let place = Placement::new((a, b));
+    let (dir, n) = (place.dir, line.normal);
+    let cal = unit_step(calibrated);
+    let pixel = |p: [f64; 2]| grey(frame, p);
     let mut out = Profile {
         stations: 0,
         ratio: [0.0; STATIONS],
@@ -294,10 +323,9 @@ pub fn profile(
     let depths_in = s.inside_px.round() as i64;
     let depths_out = s.outside_px.round() as i64;
     for k in 0..STATIONS {
-        let c = (k as f64 + 0.5) / STATIONS as f64 * len;
-        let centre = line.foot([a[0] + c * dir[0], a[1] + c * dir[1]]);
+        let centre = place.centre(line, k);
         let (mut sum_in, mut n_in, mut sum_out, mut n_out) = (0.0, 0usize, 0.0, 0usize);
-        for j in -along..=along {
+        for j in -place.along..=place.along {
             let q = [centre[0] + j as f64 * dir[0], centre[1] + j as f64 * dir[1]];
             for d in 0..=depths_in {
                 let depth = s.margin_px + d as f64;
@@ -352,7 +380,7 @@ pub fn check_edges(
     // within the slack when the fit left it out.
     let mut beam_edge = fitted[RED].then_some(red);
     // The faces left out of the fit whose corner is in view, for the turned-face check.
-    let mut unfitted_faces: [Option<(Span, Profile)>; 3] = [None; 3];
+    let mut unfitted_faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -416,7 +444,7 @@ pub fn check_edges(
             return Some(miss);
         }
         if e != RED && corner && !fitted[e] {
-            unfitted_faces[e] = Some(((a, b), p));
+            unfitted_faces[e] = Some(((a, b), p, partner));
         }
         if e != RED && corner {
             let held = p.corner_held();
@@ -444,9 +472,8 @@ pub fn check_edges(
     }
     // Last, as the dearest: a face the frame shows turned from its prediction.
     for (e, face) in unfitted_faces.iter().enumerate() {
-        if let Some((span, p)) = face {
-            let partner = t.line(pose, if e == BLUE { GREEN } else { BLUE });
-            if turned_face(frame, &t.line(pose, e), *span, Some(&partner), &s, p) {
+        if let Some((span, p, partner)) = face {
+            if turned_face(frame, &t.line(pose, e), *span, partner.as_ref(), &s, p) {
                 return Some(Miss::EdgeMissing(Edge::ALL[e]));
             }
         }
@@ -485,14 +512,11 @@ fn locate_steps(
     step: f64,
 ) -> [(f64, f64); STATIONS] {
     let mut best = [(f64::NEG_INFINITY, 0.0); STATIONS];
-    let (w, h) = (frame.width() as i64, frame.height() as i64);
-    let len = norm(sub(b, a));
-    if len <= 0.0 {
+    let place = Placement::new((a, b));
+    if place.len <= 0.0 {
         return best;
     }
-    let dir = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
-    let n = line.normal;
-    let along = (0.5 * len / STATIONS as f64).min(STATION_HALF_PX).floor() as i64;
+    let (dir, n) = (place.dir, line.normal);
     let margin = s.margin_px.round() as i64;
     let (din, dout) = (s.inside_px.round() as i64, s.outside_px.round() as i64);
     let reach = margin + din.max(dout);
@@ -501,24 +525,21 @@ fn locate_steps(
     if width > SECTION_MAX {
         return best;
     }
-    let cal = if step.abs() < 1.0 {
-        step.signum()
-    } else {
-        step
-    };
+    let cal = unit_step(step);
     for (k, station) in best.iter_mut().enumerate() {
-        let c = (k as f64 + 0.5) / STATIONS as f64 * len;
-        let centre = line.foot([a[0] + c * dir[0], a[1] + c * dir[1]]);
+        let centre = place.centre(line, k);
         // Mean grey level at each depth along the normal (NaN where none is in view).
         let mut section = [f64::NAN; SECTION_MAX];
         for (i, v) in section[..width].iter_mut().enumerate() {
             let depth = (i as i64 - half) as f64;
             let (mut sum, mut count) = (0.0, 0usize);
-            for j in -along..=along {
-                let x = (centre[0] + j as f64 * dir[0] + depth * n[0]).round() as i64;
-                let y = (centre[1] + j as f64 * dir[1] + depth * n[1]).round() as i64;
-                if x >= 0 && y >= 0 && x < w && y < h {
-                    sum += f64::from(frame.get_pixel(x as u32, y as u32)[0]);
+            for j in -place.along..=place.along {
+                let p = [
+                    centre[0] + j as f64 * dir[0] + depth * n[0],
+                    centre[1] + j as f64 * dir[1] + depth * n[1],
+                ];
+                if let Some(v) = grey(frame, p) {
+                    sum += v;
                     count += 1;
                 }
             }
@@ -569,7 +590,8 @@ fn turned_face(
     s: &Sampling,
     predicted: &Profile,
 ) -> bool {
-    if shown(predicted) + TURNED_GAIN > STATIONS as f64 {
+    let before = shown(predicted);
+    if before + TURNED_GAIN > STATIONS as f64 {
         return false;
     }
     let len = norm(sub(b, a));
@@ -631,7 +653,7 @@ fn turned_face(
     }
     let turned = Line::through(a1, normal);
     let q = profile(frame, &turned, (a1, b1), partner, s, predicted.step);
-    q.stations == STATIONS && shown(&q) >= shown(predicted) + TURNED_GAIN
+    q.stations == STATIONS && shown(&q) >= before + TURNED_GAIN
 }
 
 /// How far behind the back face's base the lower face is checked, in tip heights:
