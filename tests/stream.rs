@@ -242,12 +242,18 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
     let span_s = t(haptic.len() - 1) - t(0);
     let rate_hz = (haptic.len() - 1) as f64 / span_s;
     let over_run_hz = haptic.len() as f64 / stats.duration_s;
-    eprintln!("haptic stream: {rate_hz:.1} Hz over its span, {over_run_hz:.1} Hz over the run");
-    assert!((rate_hz / HAPTIC_HZ - 1.0).abs() <= 0.1, "{rate_hz}");
-    assert!(
-        (over_run_hz / HAPTIC_HZ - 1.0).abs() <= 0.1,
-        "{over_run_hz}"
+    // The stream follows the loop's ticks: a loop the host stalls (below its 1 kHz)
+    // sends fewer, at most in the loop's proportion (a stall shorter than the stream's
+    // period costs it nothing), and never catches up with a burst.
+    let expected_hz = HAPTIC_HZ * (stats.haptic_loop.rate_hz / 1000.0).min(1.0);
+    eprintln!(
+        "haptic stream: {rate_hz:.1} Hz over its span, {over_run_hz:.1} Hz over the run, \
+         {expected_hz:.1} Hz expected from the loop's {:.1} Hz",
+        stats.haptic_loop.rate_hz
     );
+    for hz in [rate_hz, over_run_hz] {
+        assert!(hz >= 0.9 * expected_hz && hz <= 1.1 * HAPTIC_HZ, "{hz} Hz");
+    }
     assert_eq!(streamed.haptic_sent, haptic.len() as u64);
     for (i, (_, v)) in haptic.iter().enumerate() {
         assert_eq!(v["seq"].as_u64(), Some(i as u64 + 1), "no gaps: {v}");
