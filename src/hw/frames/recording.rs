@@ -3,7 +3,7 @@
 //! killed may leave its last frame short: that frame is the end of the file, with a
 //! warning. Bytes that are not a header are skipped to the next one, as the pipe does.
 use std::fs::File;
-use std::io::{BufReader, ErrorKind, Read};
+use std::io::{BufReader, ErrorKind, Read, Seek, SeekFrom};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
@@ -19,6 +19,10 @@ pub enum FrameFileError {
         source: std::io::Error,
     },
 }
+
+/// The read buffer while indexing: a few headers, so that skipping a frame's pixels
+/// reads none of them.
+const INDEX_BUFFER: usize = 4096;
 
 /// A frames file opened for reading, front to back.
 pub struct FrameFile {
@@ -80,6 +84,10 @@ impl FrameFile {
 
     /// Every frame's header and where its pixels start, without reading the pixels.
     pub fn index(mut self) -> Result<FrameIndex, FrameFileError> {
+        let mut file = self.reader.into_inner();
+        let at = file.seek(SeekFrom::Start(self.offset));
+        self.reader = BufReader::with_capacity(INDEX_BUFFER, file);
+        at.map_err(|source| self.io_error(source))?;
         let len = self
             .reader
             .get_ref()
