@@ -2,8 +2,12 @@
 //! settings. The default for every kind is `"sim"`, the simulated lab, so a
 //! configuration that names no hardware never touches any.
 //!
-//! Each section is read as a TOML table here and then into the backend's own raw struct
-//! (`deny_unknown_fields`), so `src/config/mod.rs` needs to know nothing about backends.
+//! Each section is read as a TOML table here and then ([`tagged`]) into its raw enum,
+//! tagged by `backend`: each variant holds the backend's own struct of keys
+//! (`deny_unknown_fields`), so the backend chosen decides which keys exist, and a key
+//! of another backend is an error that lists the chosen one's. `[daq.<axis>]` tables
+//! are tagged the same way by `output`. `src/config/mod.rs` needs to know nothing
+//! about backends.
 //! Keys are validated in every build; whether the backend's cargo feature is compiled
 //! in is checked when the devices are opened ([`super::open::check_compiled`]), so a
 //! configuration can be checked anywhere.
@@ -70,9 +74,9 @@ impl DevicesConfig {
         haptic: RawDevice,
         check: &Checker,
     ) -> Result<DevicesConfig, ConfigError> {
-        let frames: RawFrames = section(check, "frames", frames)?;
-        let daq: RawDaq = section(check, "daq", daq)?;
-        let haptic: RawHaptic = section(check, "haptic", haptic)?;
+        let frames: RawFrames = tagged(check, "frames", "backend", Some("sim"), frames)?;
+        let daq: RawDaq = tagged(check, "daq", "backend", Some("sim"), daq)?;
+        let haptic: RawHaptic = tagged(check, "haptic", "backend", Some("sim"), haptic)?;
         Ok(DevicesConfig {
             frames: frames.validate(check)?,
             daq: daq.validate(check)?,
@@ -81,49 +85,75 @@ impl DevicesConfig {
     }
 }
 
-/// Reads a section table into its raw struct; errors name the section.
-fn section<T: DeserializeOwned>(
+/// The keys of a choice that has none (`backend = "sim"`, `output = "none"`).
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct NoKeys {}
+
+/// Reads the table `name` into `T`, an enum tagged by its key `tag` (`default` when the
+/// table has none): the tag selects the variant, and the variant's struct the keys that
+/// exist. Errors name the key: `frames.device is not a key of frames.backend = "pipe"
+/// (its keys: path, format, width, height, timeout_ms)`.
+pub(crate) fn tagged<T: DeserializeOwned>(
     check: &Checker,
     name: &str,
-    table: RawDevice,
+    tag: &str,
+    default: Option<&str>,
+    mut table: toml::Table,
 ) -> Result<T, ConfigError> {
-    toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| check.inconsistent(format!("[{name}]: {}", e.message())))
-}
-
-/// The backend name of a section, checked against the known ones.
-pub(crate) fn backend_name<'a>(
-    check: &Checker,
-    section: &str,
-    name: &'a Option<String>,
-    known: &[&str],
-) -> Result<&'a str, ConfigError> {
-    match name.as_deref() {
-        None => Ok("sim"),
-        Some(name) if known.contains(&name) => Ok(name),
-        Some(name) => Err(check.invalid(
-            &format!("{section}.backend"),
-            format_args!("{name:?}"),
-            &format!("must be one of {known:?}"),
-        )),
+    if let (false, Some(default)) = (table.contains_key(tag), default) {
+        table.insert(tag.into(), default.into());
     }
-}
-
-/// Rejects keys that the chosen option does not use (`present`: key name, whether set;
-/// `chosen`: `"frames.backend = \"v4l2\""`).
-pub(crate) fn only_for(
-    check: &Checker,
-    section: &str,
-    chosen: &str,
-    present: &[(&str, bool)],
-) -> Result<(), ConfigError> {
-    match present.iter().find(|(_, set)| *set) {
-        Some((key, _)) => {
-            Err(check.inconsistent(format!("{section}.{key} is not used by {chosen}")))
+    let read = |table: toml::Table| -> Result<T, String> {
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| e.message().to_string())
+    };
+    let message = match read(table.clone()) {
+        Ok(raw) => return Ok(raw),
+        Err(message) => message,
+    };
+    // serde's words, with the key they are about.
+    let chosen = table
+        .get(tag)
+        .map(|v| format!("{name}.{tag} = {v}"))
+        .unwrap_or_default();
+    let listed = |text: &str| {
+        let list = text
+            .trim_start_matches(", expected ")
+            .trim_start_matches("one of ");
+        list.replace('`', "")
+    };
+    let explained = if let Some((key, rest)) = message
+        .strip_prefix("unknown field `")
+        .and_then(|m| m.split_once('`'))
+    {
+        if rest.starts_with(", there are no fields") {
+            format!("{name}.{key} is not a key of {chosen}, which has none")
+        } else {
+            format!(
+                "{name}.{key} is not a key of {chosen} (its keys: {})",
+                listed(rest)
+            )
         }
-        None => Ok(()),
-    }
+    } else if let Some((_, rest)) = message
+        .strip_prefix("unknown variant `")
+        .and_then(|m| m.split_once('`'))
+    {
+        format!("{chosen} is not one of: {}", listed(rest))
+    } else if message == format!("missing field `{tag}`") {
+        // The values there are: what an empty one is told.
+        table.insert(tag.into(), "".into());
+        let choices = read(table)
+            .err()
+            .and_then(|m| m.split_once('`').map(|(_, r)| r.to_string()))
+            .and_then(|r| r.split_once('`').map(|(_, r)| listed(r)))
+            .unwrap_or_default();
+        format!("missing {name}.{tag} (one of: {choices})")
+    } else {
+        format!("[{name}]: {message}")
+    };
+    Err(check.inconsistent(explained))
 }
 
 /// A required key of a backend.
@@ -167,17 +197,23 @@ mod tests {
     fn unknown_backend_and_key_are_named() {
         assert_eq!(
             error_of("[frames]\nbackend = \"usb\"\n"),
-            "lab.toml: frames.backend must be one of [\"sim\", \"v4l2\", \"pipe\"], got \"usb\""
+            "lab.toml: frames.backend = \"usb\" is not one of: sim, v4l2, pipe"
         );
         let msg = error_of("[daq]\nbackend = \"comedi\"\ndevise = \"/dev/comedi0\"\n");
-        assert!(
-            msg.starts_with("lab.toml: [daq]: unknown field `devise`"),
-            "{msg}"
+        assert_eq!(
+            msg,
+            "lab.toml: daq.devise is not a key of daq.backend = \"comedi\" \
+             (its keys: device, x, y, z)"
         );
+        // A value of the wrong type is named with its section.
+        let msg = error_of("[frames]\nbackend = \"v4l2\"\nwidth = \"wide\"\n");
+        assert!(msg.starts_with("lab.toml: [frames]: invalid type"), "{msg}");
+        let msg = error_of("[frames]\nbackend = 3\n");
+        assert!(msg.starts_with("lab.toml: [frames]: invalid type"), "{msg}");
         let msg = error_of("[frames]\ndevice = \"/dev/video0\"\n");
         assert_eq!(
             msg,
-            "lab.toml: frames.device is not used by frames.backend = \"sim\""
+            "lab.toml: frames.device is not a key of frames.backend = \"sim\", which has none"
         );
     }
 }

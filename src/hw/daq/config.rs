@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use serde::Deserialize;
 
 use crate::checks::{Checker, ConfigError, List, Range};
-use crate::hw::config::{backend_name, in_range, only_for, required, DaqBackend};
+use crate::hw::config::{in_range, required, tagged, DaqBackend, NoKeys};
 
 // The accepted ranges, documented with the same words in config/lab.example.toml.
 /// DAQ analog outputs span at most +-10 V (a few boards +-20 V).
@@ -25,20 +25,37 @@ const PULSES_PER_UM: Range = Range::new(0.01, 10_000.0, "pulses/um");
 /// An NI E-series counter divides a 20 MHz timebase: 5 MHz is the fastest usable train.
 const MAX_RATE_HZ: Range = Range::new(1.0, 5e6, "Hz");
 
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawDaq {
-    backend: Option<String>,
-    device: Option<String>,
-    x: Option<RawAxis>,
-    y: Option<RawAxis>,
-    z: Option<RawAxis>,
+/// `[daq]` as written: `backend` selects the keys that exist.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "backend", rename_all = "lowercase")]
+pub(crate) enum RawDaq {
+    Sim(NoKeys),
+    Comedi(RawComedi),
 }
 
-#[derive(Debug, Default, Deserialize)]
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawAxis {
-    output: Option<String>,
+pub(crate) struct RawComedi {
+    device: Option<String>,
+    /// Each axis's table, read as a [`RawAxis`] in [`RawComedi::validate`] so that
+    /// errors name the axis.
+    x: Option<toml::Table>,
+    y: Option<toml::Table>,
+    z: Option<toml::Table>,
+}
+
+/// `[daq.<axis>]` as written: `output` selects the keys that exist.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "output", rename_all = "snake_case")]
+enum RawAxis {
+    Analog(RawAnalog),
+    StepDir(RawStepDir),
+    None(NoKeys),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAnalog {
     device: Option<String>,
     subdevice: Option<i64>,
     channel: Option<i64>,
@@ -46,6 +63,12 @@ struct RawAxis {
     range_v: Option<List<f64, 2>>,
     volts_per_um_s: Option<f64>,
     zero_v: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStepDir {
+    device: Option<String>,
     counter_subdevice: Option<i64>,
     dio_subdevice: Option<i64>,
     direction_channel: Option<i64>,
@@ -109,25 +132,24 @@ pub struct StepDirAxis {
 
 impl RawDaq {
     pub(crate) fn validate(self, check: &Checker) -> Result<DaqBackend, ConfigError> {
-        let backend = backend_name(check, "daq", &self.backend, &["sim", "comedi"])?;
-        if backend == "sim" {
-            let keys = [
-                ("device", self.device.is_some()),
-                ("x", self.x.is_some()),
-                ("y", self.y.is_some()),
-                ("z", self.z.is_some()),
-            ];
-            only_for(check, "daq", "daq.backend = \"sim\"", &keys)?;
-            return Ok(DaqBackend::Sim);
+        match self {
+            RawDaq::Sim(NoKeys {}) => Ok(DaqBackend::Sim),
+            RawDaq::Comedi(raw) => raw.validate(check).map(|c| DaqBackend::Comedi(Box::new(c))),
         }
+    }
+}
+
+impl RawComedi {
+    fn validate(self, check: &Checker) -> Result<ComediConfig, ConfigError> {
         let device = PathBuf::from(self.device.unwrap_or_else(|| "/dev/comedi0".into()));
         let axes = [("x", self.x), ("y", self.y), ("z", self.z)];
         let mut out = [AxisOutput::None, AxisOutput::None, AxisOutput::None];
         let mut axis_devices = [device.clone(), device.clone(), device.clone()];
-        for ((slot, board), (name, raw)) in out.iter_mut().zip(&mut axis_devices).zip(axes) {
+        for ((slot, board), (name, table)) in out.iter_mut().zip(&mut axis_devices).zip(axes) {
             let key = format!("daq.{name}");
-            let raw = required(check, &format!("[{key}]"), backend, raw)?;
-            if let Some(d) = &raw.device {
+            let table = required(check, &format!("[{key}]"), "comedi", table)?;
+            let raw: RawAxis = tagged(check, &key, "output", None, table)?;
+            if let Some(d) = raw.device() {
                 if d.trim().is_empty() {
                     return Err(check.invalid(
                         &format!("{key}.device"),
@@ -142,41 +164,33 @@ impl RawDaq {
         if out.iter().all(|a| *a == AxisOutput::None) {
             return Err(check.inconsistent("daq: every axis has output = \"none\"".into()));
         }
-        Ok(DaqBackend::Comedi(Box::new(ComediConfig {
+        Ok(ComediConfig {
             device,
             axes: out,
             axis_devices,
-        })))
+        })
     }
 }
 
 impl RawAxis {
+    /// The axis's own board, when it names one.
+    fn device(&self) -> Option<&str> {
+        match self {
+            RawAxis::Analog(a) => a.device.as_deref(),
+            RawAxis::StepDir(s) => s.device.as_deref(),
+            RawAxis::None(NoKeys {}) => None,
+        }
+    }
+
     fn validate(self, check: &Checker, key: &str) -> Result<AxisOutput, ConfigError> {
         let k = |name: &str| format!("{key}.{name}");
-        let analog_keys = [
-            ("subdevice", self.subdevice.is_some()),
-            ("channel", self.channel.is_some()),
-            ("range", self.range.is_some()),
-            ("range_v", self.range_v.is_some()),
-            ("volts_per_um_s", self.volts_per_um_s.is_some()),
-            ("zero_v", self.zero_v.is_some()),
-        ];
-        let step_keys = [
-            ("counter_subdevice", self.counter_subdevice.is_some()),
-            ("dio_subdevice", self.dio_subdevice.is_some()),
-            ("direction_channel", self.direction_channel.is_some()),
-            ("pulses_per_um", self.pulses_per_um.is_some()),
-            ("max_rate_hz", self.max_rate_hz.is_some()),
-            ("invert_direction", self.invert_direction.is_some()),
-        ];
         let subdevice = |v: Option<i64>, name: &str| -> Result<u32, ConfigError> {
             let v = required(check, &k(name), "comedi", v)?;
             in_range(check, &k(name), v, (0, 255), "")
         };
-        match self.output.as_deref() {
-            Some("analog") => {
-                only_for(check, key, "output = \"analog\"", &step_keys)?;
-                let range = match (self.range, self.range_v) {
+        match self {
+            RawAxis::Analog(a) => {
+                let range = match (a.range, a.range_v) {
                     (Some(_), Some(_)) => {
                         return Err(check.inconsistent(format!(
                             "{key}: give range (an index) or range_v ([min, max] volts), not both"
@@ -202,41 +216,31 @@ impl RawAxis {
                         max_v: 10.0,
                     },
                 };
-                let volts = required(check, &k("volts_per_um_s"), "comedi", self.volts_per_um_s)?;
+                let volts = required(check, &k("volts_per_um_s"), "comedi", a.volts_per_um_s)?;
                 let volts = check.number(&k("volts_per_um_s"), volts, VOLTS_PER_UM_S)?;
-                let zero_v = check.number_or(&k("zero_v"), self.zero_v, 0.0, VOLTS)?;
+                let zero_v = check.number_or(&k("zero_v"), a.zero_v, 0.0, VOLTS)?;
                 Ok(AxisOutput::Analog(AnalogAxis {
-                    subdevice: subdevice(self.subdevice, "subdevice")?,
-                    channel: subdevice(self.channel, "channel")?,
+                    subdevice: subdevice(a.subdevice, "subdevice")?,
+                    channel: subdevice(a.channel, "channel")?,
                     range,
                     volts_per_um_s: volts,
                     zero_v,
                 }))
             }
-            Some("step_dir") => {
-                only_for(check, key, "output = \"step_dir\"", &analog_keys)?;
-                let pulses = required(check, &k("pulses_per_um"), "comedi", self.pulses_per_um)?;
+            RawAxis::StepDir(s) => {
+                let pulses = required(check, &k("pulses_per_um"), "comedi", s.pulses_per_um)?;
                 let max_rate_hz =
-                    check.number_or(&k("max_rate_hz"), self.max_rate_hz, 100_000.0, MAX_RATE_HZ)?;
+                    check.number_or(&k("max_rate_hz"), s.max_rate_hz, 100_000.0, MAX_RATE_HZ)?;
                 Ok(AxisOutput::StepDir(StepDirAxis {
-                    counter_subdevice: subdevice(self.counter_subdevice, "counter_subdevice")?,
-                    dio_subdevice: subdevice(self.dio_subdevice, "dio_subdevice")?,
-                    direction_channel: subdevice(self.direction_channel, "direction_channel")?,
+                    counter_subdevice: subdevice(s.counter_subdevice, "counter_subdevice")?,
+                    dio_subdevice: subdevice(s.dio_subdevice, "dio_subdevice")?,
+                    direction_channel: subdevice(s.direction_channel, "direction_channel")?,
                     pulses_per_um: check.number(&k("pulses_per_um"), pulses, PULSES_PER_UM)?,
                     max_rate_hz,
-                    invert_direction: self.invert_direction.unwrap_or(false),
+                    invert_direction: s.invert_direction.unwrap_or(false),
                 }))
             }
-            Some("none") => {
-                only_for(check, key, "output = \"none\"", &analog_keys)?;
-                only_for(check, key, "output = \"none\"", &step_keys)?;
-                Ok(AxisOutput::None)
-            }
-            other => Err(check.invalid(
-                &k("output"),
-                format_args!("{other:?}"),
-                "must be \"analog\", \"step_dir\" or \"none\"",
-            )),
+            RawAxis::None(NoKeys {}) => Ok(AxisOutput::None),
         }
     }
 }
@@ -300,9 +304,17 @@ mod tests {
              accepted -10 to 10 V per um/s, not 0"
         );
         let msg = error_of(&format!("{base}{}", AXES.replace("\"none\"", "\"pwm\"")));
-        assert!(
-            msg.contains("daq.z.output must be") && msg.contains("\"pwm\""),
-            "{msg}"
+        assert_eq!(
+            msg,
+            "lab.toml: daq.z.output = \"pwm\" is not one of: analog, step_dir, none"
+        );
+        let msg = error_of(&format!(
+            "{base}{}",
+            AXES.replace("output = \"none\"\n", "")
+        ));
+        assert_eq!(
+            msg,
+            "lab.toml: missing daq.z.output (one of: analog, step_dir, none)"
         );
         let msg = error_of(&format!(
             "{base}{}",
@@ -318,7 +330,9 @@ mod tests {
         ));
         assert_eq!(
             msg,
-            "lab.toml: daq.y.zero_v is not used by output = \"step_dir\""
+            "lab.toml: daq.y.zero_v is not a key of daq.y.output = \"step_dir\" (its keys: \
+             device, counter_subdevice, dio_subdevice, direction_channel, pulses_per_um, \
+             max_rate_hz, invert_direction)"
         );
     }
 }

@@ -10,12 +10,20 @@ use crate::checks::{Checker, ConfigError, Range};
 
 /// The frame rate asked of the driver: a slow SEM scan (10 s a frame) to a fast camera.
 const RATE_HZ: Range = Range::new(0.1, 1000.0, "Hz");
-use crate::hw::config::{backend_name, in_range, only_for, FramesBackend};
+use crate::hw::config::{in_range, FramesBackend, NoKeys};
 
-#[derive(Debug, Default, Deserialize)]
+/// `[frames]` as written: `backend` selects the keys that exist.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "backend", rename_all = "lowercase")]
+pub(crate) enum RawFrames {
+    Sim(NoKeys),
+    V4l2(RawV4l2),
+    Pipe(RawPipe),
+}
+
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct RawFrames {
-    backend: Option<String>,
+pub(crate) struct RawV4l2 {
     device: Option<String>,
     pixel_format: Option<String>,
     width: Option<i64>,
@@ -23,8 +31,16 @@ pub(crate) struct RawFrames {
     rate_hz: Option<f64>,
     buffers: Option<i64>,
     timeout_ms: Option<i64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawPipe {
     path: Option<String>,
     format: Option<String>,
+    width: Option<i64>,
+    height: Option<i64>,
+    timeout_ms: Option<i64>,
 }
 
 /// How a V4L2 device delivers its pixels; all become 8-bit grey.
@@ -90,58 +106,34 @@ pub struct PipeConfig {
 
 impl RawFrames {
     pub(crate) fn validate(self, check: &Checker) -> Result<FramesBackend, ConfigError> {
-        let backend = backend_name(check, "frames", &self.backend, &["sim", "v4l2", "pipe"])?;
-        let v4l2_keys = [
-            ("device", self.device.is_some()),
-            ("pixel_format", self.pixel_format.is_some()),
-            ("rate_hz", self.rate_hz.is_some()),
-            ("buffers", self.buffers.is_some()),
-        ];
-        let pipe_keys = [
-            ("path", self.path.is_some()),
-            ("format", self.format.is_some()),
-        ];
-        let shared = [
-            ("width", self.width.is_some()),
-            ("height", self.height.is_some()),
-            ("timeout_ms", self.timeout_ms.is_some()),
-        ];
-        let chosen = format!("frames.backend = {backend:?}");
-        match backend {
-            "v4l2" => {
-                only_for(check, "frames", &chosen, &pipe_keys)?;
-                self.v4l2(check).map(FramesBackend::V4l2)
-            }
-            "pipe" => {
-                only_for(check, "frames", &chosen, &v4l2_keys)?;
-                self.pipe(check).map(FramesBackend::Pipe)
-            }
-            _ => {
-                for keys in [&v4l2_keys[..], &pipe_keys, &shared] {
-                    only_for(check, "frames", &chosen, keys)?;
-                }
-                Ok(FramesBackend::Sim)
-            }
-        }
-    }
-
-    fn size(&self, check: &Checker) -> Result<(Option<u32>, Option<u32>), ConfigError> {
-        let w = self
-            .width
-            .map(|w| in_range(check, "frames.width", w, (1, 16384), "px"));
-        let h = self
-            .height
-            .map(|h| in_range(check, "frames.height", h, (1, 16384), "px"));
-        Ok((w.transpose()?, h.transpose()?))
-    }
-
-    fn timeout_ms(&self, check: &Checker, default: u64) -> Result<u64, ConfigError> {
-        self.timeout_ms.map_or(Ok(default), |t| {
-            in_range(check, "frames.timeout_ms", t, (10, 600_000), "ms").map(u64::from)
+        Ok(match self {
+            RawFrames::Sim(NoKeys {}) => FramesBackend::Sim,
+            RawFrames::V4l2(raw) => FramesBackend::V4l2(raw.validate(check)?),
+            RawFrames::Pipe(raw) => FramesBackend::Pipe(raw.validate(check)?),
         })
     }
+}
 
-    fn v4l2(self, check: &Checker) -> Result<V4l2Config, ConfigError> {
+/// `frames.width` and `frames.height`, each when given.
+fn size(
+    check: &Checker,
+    width: Option<i64>,
+    height: Option<i64>,
+) -> Result<(Option<u32>, Option<u32>), ConfigError> {
+    let w = width.map(|w| in_range(check, "frames.width", w, (1, 16384), "px"));
+    let h = height.map(|h| in_range(check, "frames.height", h, (1, 16384), "px"));
+    Ok((w.transpose()?, h.transpose()?))
+}
+
+/// `frames.timeout_ms`, `default` when not given.
+fn timeout_ms(check: &Checker, value: Option<i64>, default: u64) -> Result<u64, ConfigError> {
+    value.map_or(Ok(default), |t| {
+        in_range(check, "frames.timeout_ms", t, (10, 600_000), "ms").map(u64::from)
+    })
+}
+
+impl RawV4l2 {
+    fn validate(self, check: &Checker) -> Result<V4l2Config, ConfigError> {
         let pixel_format = match self.pixel_format.as_deref() {
             None | Some("GREY") => PixelFormat::Grey,
             Some("YUYV") => PixelFormat::Yuyv,
@@ -154,7 +146,7 @@ impl RawFrames {
                 ))
             }
         };
-        let (width, height) = self.size(check)?;
+        let (width, height) = size(check, self.width, self.height)?;
         let rate_hz = check.number_or("frames.rate_hz", self.rate_hz, 30.0, RATE_HZ)?;
         let buffers = self
             .buffers
@@ -170,11 +162,13 @@ impl RawFrames {
             height: height.unwrap_or(480),
             rate_hz,
             buffers,
-            timeout_ms: self.timeout_ms(check, 1000)?,
+            timeout_ms: timeout_ms(check, self.timeout_ms, 1000)?,
         })
     }
+}
 
-    fn pipe(self, check: &Checker) -> Result<PipeConfig, ConfigError> {
+impl RawPipe {
+    fn validate(self, check: &Checker) -> Result<PipeConfig, ConfigError> {
         let path = match self.path.as_deref() {
             None => {
                 return Err(check.inconsistent(
@@ -188,7 +182,7 @@ impl RawFrames {
             }
             Some(p) => PipePath::File(PathBuf::from(p)),
         };
-        let size = self.size(check)?;
+        let size = size(check, self.width, self.height)?;
         let format = match (self.format.as_deref(), size) {
             (None | Some("header"), (None, None)) => PipeFormat::Header,
             (None | Some("header"), _) => {
@@ -215,7 +209,7 @@ impl RawFrames {
         Ok(PipeConfig {
             path,
             format,
-            timeout_ms: self.timeout_ms(check, 2000)?,
+            timeout_ms: timeout_ms(check, self.timeout_ms, 2000)?,
         })
     }
 }
@@ -280,7 +274,8 @@ mod tests {
         assert!(error_of("[frames]\nbackend = \"pipe\"\n").contains("missing frames.path"));
         assert_eq!(
             error_of("[frames]\nbackend = \"pipe\"\npath = \"-\"\ndevice = \"/dev/video0\"\n"),
-            "lab.toml: frames.device is not used by frames.backend = \"pipe\""
+            "lab.toml: frames.device is not a key of frames.backend = \"pipe\" \
+             (its keys: path, format, width, height, timeout_ms)"
         );
     }
 }

@@ -13,15 +13,28 @@ use crate::checks::{Checker, ConfigError, List, Range};
 const TRAVEL_MM: Range = Range::new(1.0, 1000.0, "mm");
 /// A haptic device's force: the PHANToM Touch peaks at 3.3 N, the Premium 1.5 at 8.5 N.
 const FULL_SCALE_N: Range = Range::new(0.01, 10.0, "N");
-use crate::hw::config::{backend_name, in_range, only_for, required, HapticBackend};
+use crate::hw::config::{in_range, required, HapticBackend, NoKeys};
 
-#[derive(Debug, Default, Deserialize)]
+/// `[haptic]` as written: `backend` selects the keys that exist.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "backend", rename_all = "lowercase")]
+pub(crate) enum RawHaptic {
+    Sim(NoKeys),
+    OpenHaptics(RawOpenHaptics),
+    Hid(RawHid),
+}
+
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct RawHaptic {
-    backend: Option<String>,
+pub(crate) struct RawOpenHaptics {
     library: Option<String>,
     device_name: Option<String>,
     stall_ms: Option<i64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawHid {
     vendor_id: Option<i64>,
     product_id: Option<i64>,
     report_id: Option<i64>,
@@ -105,49 +118,29 @@ pub struct HidConfig {
 
 impl RawHaptic {
     pub(crate) fn validate(self, check: &Checker) -> Result<HapticBackend, ConfigError> {
-        let known = ["sim", "openhaptics", "hid"];
-        let backend = backend_name(check, "haptic", &self.backend, &known)?;
-        let chosen = format!("haptic.backend = {backend:?}");
-        let hd_keys = [
-            ("library", self.library.is_some()),
-            ("device_name", self.device_name.is_some()),
-            ("stall_ms", self.stall_ms.is_some()),
-        ];
-        let hid_keys = [
-            ("vendor_id", self.vendor_id.is_some()),
-            ("product_id", self.product_id.is_some()),
-            ("report_id", self.report_id.is_some()),
-            ("report_length", self.report_length.is_some()),
-            ("x", self.x.is_some()),
-            ("y", self.y.is_some()),
-            ("z", self.z.is_some()),
-            ("force", self.force.is_some()),
-        ];
-        match backend {
-            "openhaptics" => {
-                only_for(check, "haptic", &chosen, &hid_keys)?;
-                let stall_ms = self.stall_ms.map_or(Ok(50), |s| {
-                    in_range(check, "haptic.stall_ms", s, (5, 10_000), "ms").map(u64::from)
-                })?;
-                Ok(HapticBackend::OpenHaptics(OpenHapticsConfig {
-                    library: self.library.unwrap_or_else(|| "libHD.so".into()),
-                    device_name: self.device_name,
-                    stall_ms,
-                }))
-            }
-            "hid" => {
-                only_for(check, "haptic", &chosen, &hd_keys)?;
-                self.hid(check).map(HapticBackend::Hid)
-            }
-            _ => {
-                only_for(check, "haptic", &chosen, &hd_keys)?;
-                only_for(check, "haptic", &chosen, &hid_keys)?;
-                Ok(HapticBackend::Sim)
-            }
-        }
+        Ok(match self {
+            RawHaptic::Sim(NoKeys {}) => HapticBackend::Sim,
+            RawHaptic::OpenHaptics(raw) => HapticBackend::OpenHaptics(raw.validate(check)?),
+            RawHaptic::Hid(raw) => HapticBackend::Hid(raw.validate(check)?),
+        })
     }
+}
 
-    fn hid(self, check: &Checker) -> Result<HidConfig, ConfigError> {
+impl RawOpenHaptics {
+    fn validate(self, check: &Checker) -> Result<OpenHapticsConfig, ConfigError> {
+        let stall_ms = self.stall_ms.map_or(Ok(50), |s| {
+            in_range(check, "haptic.stall_ms", s, (5, 10_000), "ms").map(u64::from)
+        })?;
+        Ok(OpenHapticsConfig {
+            library: self.library.unwrap_or_else(|| "libHD.so".into()),
+            device_name: self.device_name,
+            stall_ms,
+        })
+    }
+}
+
+impl RawHid {
+    fn validate(self, check: &Checker) -> Result<HidConfig, ConfigError> {
         let id = |key: &str, v: Option<i64>| -> Result<u16, ConfigError> {
             let v = required(check, key, "hid", v)?;
             in_range(check, key, v, (0, 0xffff), "").map(|v| v as u16)
@@ -308,7 +301,8 @@ mod tests {
         let msg = error_of("[haptic]\nbackend = \"openhaptics\"\nvendor_id = 1\n");
         assert_eq!(
             msg,
-            "lab.toml: haptic.vendor_id is not used by haptic.backend = \"openhaptics\""
+            "lab.toml: haptic.vendor_id is not a key of haptic.backend = \"openhaptics\" \
+             (its keys: library, device_name, stall_ms)"
         );
     }
 }
