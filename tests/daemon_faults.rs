@@ -9,13 +9,12 @@ use std::time::Duration;
 use image::GrayImage;
 use nalgebra::Vector3;
 use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
-use nanoforce::daemon::{
-    Daemon, Devices, Estimator, ExitReason, FrameEstimate, LoopOptions, RunOptions,
-};
+use nanoforce::daemon::{Daemon, Devices, Estimator, ExitReason, LoopOptions, RunOptions};
 use nanoforce::hw::daq::{DaqError, RateOutput};
 use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
 use nanoforce::hw::haptic::{HapticDevice, HapticError};
 use nanoforce::hw::Clock;
+use nanoforce::vision::Estimate;
 
 /// Switches and records shared between the test and its fake devices.
 #[derive(Default)]
@@ -26,7 +25,7 @@ struct Lab {
     daq_fails: AtomicBool,
     tracker_panics: AtomicBool,
     tracker_delay_ms: AtomicU64,
-    estimate: Mutex<Option<FrameEstimate>>,
+    estimate: Mutex<Option<Estimate>>,
     /// Incremented by every haptic read: the tick number.
     reads: AtomicU64,
     /// (tick, velocity, write succeeded)
@@ -98,7 +97,7 @@ impl FrameSource for Frames {
 struct Tracker(Arc<Lab>);
 
 impl Estimator for Tracker {
-    fn estimate(&mut self, _frame: &GrayImage) -> FrameEstimate {
+    fn estimate(&mut self, _frame: &GrayImage) -> Estimate {
         assert!(
             !self.0.tracker_panics.load(Ordering::SeqCst),
             "injected tracker panic"
@@ -107,11 +106,7 @@ impl Estimator for Tracker {
         if delay > 0 {
             std::thread::sleep(Duration::from_millis(delay));
         }
-        self.0
-            .estimate
-            .lock()
-            .unwrap()
-            .unwrap_or(FrameEstimate::NONE)
+        self.0.estimate.lock().unwrap().unwrap_or_default()
     }
 }
 
@@ -221,14 +216,15 @@ fn start(lab: &Arc<Lab>, frame_period_ms: u64) -> nanoforce::daemon::DaemonHandl
     Daemon::start(gains(), devices, options).unwrap()
 }
 
-fn detected(force_nn: f64) -> Option<FrameEstimate> {
-    Some(FrameEstimate {
+fn detected(force_nn: f64) -> Option<Estimate> {
+    Some(Estimate {
         detected: true,
         angle_deg: Some(1.0),
         force_nn: Some(force_nn),
         apex_px: Some([1.0, 1.0]),
         confidence: 1.0,
         angle_sigma_deg: Some(0.02),
+        ..Estimate::default()
     })
 }
 
@@ -374,7 +370,7 @@ fn stale_estimates_fade_the_force_and_block_pressing() {
         lab.last_force()
     );
     // The tip is lost: the force must fade over fade_ms (200 ms), not vanish at once.
-    *lab.estimate.lock().unwrap() = Some(FrameEstimate::NONE);
+    *lab.estimate.lock().unwrap() = Some(Estimate::default());
     sleep_ms(60);
     let mid = lab.last_force().z;
     assert!(mid > 0.3 && mid < 0.95, "fading, not stepping: {mid}");

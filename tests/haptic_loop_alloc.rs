@@ -10,11 +10,12 @@ use image::GrayImage;
 use nalgebra::Vector3;
 use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
 use nanoforce::daemon::stream::StreamConfig;
-use nanoforce::daemon::{Daemon, Devices, Estimator, FrameEstimate, LoopOptions, RunOptions};
+use nanoforce::daemon::{Daemon, Devices, Estimator, LoopOptions, RunOptions};
 use nanoforce::hw::daq::{DaqError, RateOutput};
 use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
 use nanoforce::hw::haptic::{HapticDevice, HapticError};
 use nanoforce::hw::Clock;
+use nanoforce::vision::Estimate;
 
 mod alloc_counter;
 
@@ -44,20 +45,20 @@ impl FrameSource for Frames {
 /// far enough for the plausibility gate to hold it.
 struct Tracker(u64);
 impl Estimator for Tracker {
-    fn estimate(&mut self, _frame: &GrayImage) -> FrameEstimate {
+    fn estimate(&mut self, _frame: &GrayImage) -> Estimate {
         self.0 += 1;
         let force_nn = match self.0 % 6 {
             0 | 3 => 3000.0,
             1 | 5 => 1000.0,
             _ => 1010.0,
         };
-        FrameEstimate {
+        Estimate {
             detected: true,
-            angle_deg: None,
             force_nn: Some(force_nn),
             apex_px: Some([3.0, 4.0]),
             confidence: 0.9,
             angle_sigma_deg: Some(0.05),
+            ..Estimate::default()
         }
     }
 }

@@ -19,7 +19,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("vision", 1),
     ("hw", 1),
     // The renderer (draws the probe the model bends, binarised as vision does); the
-    // teleoperation law (reads hw's samples).
+    // teleoperation law (reads hw's samples and the tracker's estimate).
     ("scene", 2),
     ("control", 2),
     // The simulated lab and its "sim" devices; recorded sessions on disk.
@@ -276,10 +276,7 @@ fn the_scan_finds_every_spelling_of_an_import() {
     );
     // From daemon/stream/datagram.rs `super::super` is daemon; one more is the root.
     assert_eq!(
-        targets(
-            "daemon/stream/datagram",
-            "use super::super::PublishedEstimate;\n"
-        ),
+        targets("daemon/stream/datagram", "use super::super::Estimator;\n"),
         []
     );
     assert_eq!(

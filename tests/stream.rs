@@ -15,11 +15,13 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use nanoforce::cli::run::SIM_CONFIG;
 use nanoforce::config::{Config, PixelOrigin};
+use nanoforce::control::Published;
 use nanoforce::daemon::stats::RunStats;
 use nanoforce::daemon::stream::{self, StreamShared};
-use nanoforce::daemon::{lab, Daemon, ExitReason, PublishedEstimate, RunOptions};
+use nanoforce::daemon::{lab, Daemon, ExitReason, RunOptions};
 use nanoforce::hw::Clock;
 use nanoforce::session::utc::UtcAnchor;
+use nanoforce::vision::Estimate;
 use serde_json::Value;
 
 /// One simulated lab at a time.
@@ -406,29 +408,19 @@ fn the_documented_python_reader_reads_the_stream() {
     let mut started = stream::start(&config, shared.clone(), anchor, PixelOrigin::Centre).unwrap();
     for seq in 1..=COUNT {
         let detected = !seq.is_multiple_of(4);
-        let estimate = PublishedEstimate {
+        let estimate = Published {
             seq,
             frame_sequence: seq + 100,
             frame_time_s: clock.now_s(),
             published_s: clock.now_s(),
-            detected,
-            angle_deg: if detected {
-                0.01 * seq as f64
-            } else {
-                f64::NAN
+            estimate: Estimate {
+                detected,
+                angle_deg: detected.then_some(0.01 * seq as f64),
+                force_nn: detected.then_some(25.0 * seq as f64),
+                apex_px: detected.then_some([300.0, 200.0]),
+                confidence: 0.9,
+                ..Estimate::default()
             },
-            force_nn: if detected {
-                25.0 * seq as f64
-            } else {
-                f64::NAN
-            },
-            apex_px: if detected {
-                [300.0, 200.0]
-            } else {
-                [f64::NAN; 2]
-            },
-            confidence: 0.9,
-            angle_sigma_deg: f64::NAN,
         };
         started.estimates.offer(&estimate);
         std::thread::sleep(Duration::from_millis(2));

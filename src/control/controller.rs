@@ -7,27 +7,12 @@ use nalgebra::Vector3;
 
 use super::gains::TeleopGains;
 use super::gate::{Candidate, Gate, GateCounters, Judgement};
+use super::published::Published;
 use super::ramp::Ramp;
 use super::safety::{Facts, PressBlock, Safety, SafetyCounters, SafetyState, Verdict};
 use super::timing::{FrameTiming, TravelLog};
 pub use crate::hw::haptic::HapticSample;
 use crate::model::ModelTable;
-
-/// The newest force estimate published by the tracker.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct SensedForce {
-    /// Increments with every published estimate.
-    pub seq: u64,
-    /// When the frame was captured, seconds on the daemon's monotonic clock.
-    pub frame_time_s: f64,
-    pub detected: bool,
-    /// Signed as the tip angle; meaningful only when `detected`.
-    pub force_nn: f64,
-    /// The tip angle, degrees (NaN: unknown).
-    pub angle_deg: f64,
-    /// The angle's standard error, degrees (NaN: unknown).
-    pub angle_sigma_deg: f64,
-}
 
 /// Everything the law needs for one tick.
 #[derive(Debug, Clone, Copy)]
@@ -36,7 +21,8 @@ pub struct TickInput {
     pub now_s: f64,
     /// `None`: the device is lost or its read failed.
     pub haptic: Option<HapticSample>,
-    pub estimate: Option<SensedForce>,
+    /// The newest estimate the tracker published.
+    pub estimate: Option<Published>,
     /// Whether the previous stage command was written successfully.
     pub daq_ok: bool,
 }
@@ -206,32 +192,33 @@ impl Controller {
     /// becomes the ramp's target (weighted by its sigma), reached one frame period later,
     /// or over `fade_in_ms` when re-acquired or newly confirmed; a held one changes
     /// nothing; a miss starts the fade.
-    fn follow_estimate(&mut self, now_s: f64, estimate: &SensedForce) {
-        if self.last_seq == Some(estimate.seq) || estimate.seq == 0 {
+    fn follow_estimate(&mut self, now_s: f64, published: &Published) {
+        if self.last_seq == Some(published.seq) || published.seq == 0 {
             return;
         }
-        self.last_seq = Some(estimate.seq);
-        self.timing.observe(estimate.frame_time_s, now_s);
-        if !(estimate.detected && estimate.force_nn.is_finite()) {
+        self.last_seq = Some(published.seq);
+        self.timing.observe(published.frame_time_s, now_s);
+        let e = &published.estimate;
+        let Some(force_nn) = e.felt_force_nn() else {
             self.missed = true;
             self.gate.miss();
             return;
-        }
+        };
         let candidate = Candidate::new(
-            estimate.force_nn,
-            estimate.angle_deg,
-            estimate.angle_sigma_deg,
+            force_nn,
+            e.angle_deg.unwrap_or(f64::NAN),
+            e.angle_sigma_deg.unwrap_or(f64::NAN),
             self.gate.limits(),
             &self.gains.cantilever,
-            self.travel.at(estimate.frame_time_s - STAGE_SETTLE_S),
+            self.travel.at(published.frame_time_s - STAGE_SETTLE_S),
         );
         match self.gate.judge(candidate, self.travel.total_um()) {
             Judgement::Held => {}
             Judgement::Accept { weight, fade_in } => {
                 self.missed = false;
                 self.accepted = Some(Accepted {
-                    frame_time_s: estimate.frame_time_s,
-                    force_nn: estimate.force_nn,
+                    frame_time_s: published.frame_time_s,
+                    force_nn,
                 });
                 if fade_in {
                     self.fade_in_until_s = now_s + self.gate.limits().fade_in_ms * 1e-3;
@@ -243,7 +230,7 @@ impl Controller {
                     .unwrap_or(DEFAULT_FRAME_INTERVAL_S)
                     .min(0.25);
                 let duration_s = period_s.max(self.fade_in_until_s - now_s);
-                self.sensed.retarget(estimate.force_nn * weight, duration_s);
+                self.sensed.retarget(force_nn * weight, duration_s);
             }
         }
     }

@@ -6,14 +6,16 @@
 mod controller;
 mod gains;
 mod gate;
+mod published;
 mod ramp;
 mod safety;
 mod timing;
 
-pub use controller::{Controller, HapticSample, SensedForce, TickInput, TickOutput};
+pub use controller::{Controller, HapticSample, TickInput, TickOutput};
 pub use gains::{GateLimits, SafetyLimits, TeleopGains};
 pub(crate) use gains::{RawSafety, RawTeleop};
 pub use gate::{Candidate, Gate, GateCounters, Judgement};
+pub use published::Published;
 pub use ramp::Ramp;
 pub use safety::{PressBlock, SafetyCounters, SafetyState};
 pub use timing::{FrameTiming, TravelLog};

@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 
 use super::*;
+use crate::vision::Estimate;
 
 const DT: f64 = 0.001;
 
@@ -53,7 +54,7 @@ struct Bench {
     c: Controller,
     now_s: f64,
     seq: u64,
-    estimate: Option<SensedForce>,
+    estimate: Option<Published>,
     position_mm: Vector3<f64>,
     haptic_ok: bool,
     daq_ok: bool,
@@ -79,13 +80,16 @@ impl Bench {
     /// Publishes an estimate of a frame captured `age_s` ago.
     fn publish(&mut self, force_nn: f64, detected: bool, age_s: f64) {
         self.seq += 1;
-        self.estimate = Some(SensedForce {
+        self.estimate = Some(Published {
             seq: self.seq,
             frame_time_s: self.now_s - age_s,
-            detected,
-            force_nn,
-            angle_deg: f64::NAN,
-            angle_sigma_deg: 0.02,
+            estimate: Estimate {
+                detected,
+                force_nn: Some(force_nn),
+                angle_sigma_deg: Some(0.02),
+                ..Estimate::default()
+            },
+            ..Published::default()
         });
     }
 
@@ -334,7 +338,7 @@ fn stream(b: &mut Bench, force_nn: f64, sigma_deg: f64, frames: usize) -> TickOu
     for _ in 0..frames {
         b.publish(force_nn, true, 0.0);
         if let Some(e) = b.estimate.as_mut() {
-            e.angle_sigma_deg = sigma_deg;
+            e.estimate.angle_sigma_deg = Some(sigma_deg);
         }
         out = b.run(17);
     }

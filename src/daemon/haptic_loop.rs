@@ -16,8 +16,8 @@ use nalgebra::Vector3;
 use super::rt;
 use super::stats::Histogram;
 use super::stream::HapticTap;
-use super::PublishedEstimate;
 pub use crate::config::LoopOptions;
+use crate::control::Published;
 use crate::control::{
     Controller, GateCounters, PressBlock, SafetyCounters, SafetyState, TeleopGains, TickInput,
 };
@@ -126,7 +126,7 @@ impl Drop for Outputs {
 pub struct HapticLoop {
     pub controller: Controller,
     pub outputs: Outputs,
-    pub estimates: triple_buffer::Output<PublishedEstimate>,
+    pub estimates: triple_buffer::Output<Published>,
     pub gains: rtrb::Consumer<TeleopGains>,
     pub telemetry: rtrb::Producer<TickRecord>,
     pub shared: Arc<LoopShared>,
@@ -142,7 +142,7 @@ impl HapticLoop {
         haptic: Box<dyn HapticDevice>,
         stage: Box<dyn RateOutput>,
         clock: Clock,
-        estimates: triple_buffer::Output<PublishedEstimate>,
+        estimates: triple_buffer::Output<Published>,
         new_gains: rtrb::Consumer<TeleopGains>,
         telemetry: rtrb::Producer<TickRecord>,
         shared: Arc<LoopShared>,
@@ -264,7 +264,7 @@ impl HapticLoop {
                 None
             }
         };
-        let estimate = self.estimates.read().sensed();
+        let estimate = *self.estimates.read();
         let out = self.controller.tick(&TickInput {
             now_s,
             haptic,

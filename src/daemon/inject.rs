@@ -12,11 +12,11 @@ use std::time::{Duration, Instant};
 use image::GrayImage;
 use nalgebra::Vector3;
 
-use super::snapshot::EdgeSegments;
-use super::{Estimator, FrameEstimate};
+use super::Estimator;
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
 use crate::hw::haptic::HapticSample;
 use crate::hw::haptic::{HapticDevice, HapticError};
+use crate::vision::Estimate;
 
 /// The environment variable `nanoforce run` reads.
 pub const ENV: &str = "NANOFORCE_INJECT_PANIC";
@@ -114,18 +114,9 @@ pub struct PanickingEstimator {
 }
 
 impl Estimator for PanickingEstimator {
-    fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate {
+    fn estimate(&mut self, frame: &GrayImage) -> Estimate {
         PanicInjection::check(Some(&self.injection), "tracker");
         self.inner.estimate(frame)
-    }
-
-    fn estimate_with_edges(
-        &mut self,
-        frame: &GrayImage,
-        edges: &mut EdgeSegments,
-    ) -> FrameEstimate {
-        PanicInjection::check(Some(&self.injection), "tracker");
-        self.inner.estimate_with_edges(frame, edges)
     }
 }
 

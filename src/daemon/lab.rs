@@ -5,8 +5,7 @@
 use anyhow::Context;
 use image::GrayImage;
 
-use super::snapshot::EdgeSegments;
-use super::{Devices, Estimator, FrameEstimate};
+use super::{Devices, Estimator};
 use crate::config::{CalibrationConfig, Config};
 use crate::hw::config::FramesBackend;
 use crate::hw::daq::RateOutput;
@@ -23,32 +22,8 @@ use crate::vision::{Calibration, Estimate, Tracker};
 pub struct VisionEstimator(pub Tracker);
 
 impl Estimator for VisionEstimator {
-    fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate {
-        from_estimate(&self.0.track(frame))
-    }
-
-    fn estimate_with_edges(
-        &mut self,
-        frame: &GrayImage,
-        edges: &mut EdgeSegments,
-    ) -> FrameEstimate {
-        let e = self.0.track(frame);
-        *edges = e.edges.map(|f| f.map(|f| [f.start_px, f.end_px]));
-        from_estimate(&e)
-    }
-}
-
-/// A tracker estimate as the daemon publishes it. A force clamped at the model's limit
-/// is not a measurement: such a frame is not a detection the operator may feel.
-pub fn from_estimate(e: &Estimate) -> FrameEstimate {
-    let detected = e.detected && e.force_nn.is_some() && !e.force_saturated;
-    FrameEstimate {
-        detected,
-        angle_deg: e.angle_deg.filter(|_| detected),
-        force_nn: e.force_nn.filter(|_| detected),
-        apex_px: e.apex_px.filter(|_| detected),
-        confidence: e.confidence,
-        angle_sigma_deg: e.angle_sigma_deg.filter(|_| detected),
+    fn estimate(&mut self, frame: &GrayImage) -> Estimate {
+        self.0.track(frame)
     }
 }
 

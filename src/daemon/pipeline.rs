@@ -4,9 +4,10 @@
 //!   A frame the tracker has not taken yet is overwritten and counted as dropped, so a
 //!   slow tracker never queues latency.
 //! - `tracker`: takes the newest frame, runs the [`Estimator`] on it and publishes the
-//!   estimate (time of the frame, angle, force, apex, confidence, detected) into the
-//!   triple buffer the haptic loop reads, then hands the frame to the session's frame
-//!   recorder (a copy into a bounded queue, never a wait).
+//!   estimate whole, stamped with its frame ([`Published`]), into the triple buffer the
+//!   haptic loop reads and the rings of the stream, the monitor and telemetry, then
+//!   hands the frame to the session's frame recorder (a copy into a bounded queue,
+//!   never a wait).
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
@@ -15,27 +16,17 @@ use std::time::Duration;
 use image::GrayImage;
 
 use super::frame_record::FrameTap;
-use super::snapshot::{EdgeSegments, SnapshotTap};
+use super::snapshot::SnapshotTap;
 use super::stats::{ForceErrors, Histogram};
 use super::stream::EstimateTap;
-use super::{FrameEstimate, PublishedEstimate};
+use crate::control::Published;
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
 use crate::hw::Clock;
+use crate::vision::Estimate;
 
-/// Turns a frame into a force estimate (the vision tracker, or a test double).
+/// Turns a frame into an estimate (the vision tracker, or a test double).
 pub trait Estimator: Send {
-    fn estimate(&mut self, frame: &GrayImage) -> FrameEstimate;
-
-    /// Like [`Estimator::estimate`], and writes the found edge segments into `edges` for
-    /// pictures (the monitor page, thumbnails). Default: no edges.
-    fn estimate_with_edges(
-        &mut self,
-        frame: &GrayImage,
-        edges: &mut EdgeSegments,
-    ) -> FrameEstimate {
-        *edges = [None; 3];
-        self.estimate(frame)
-    }
+    fn estimate(&mut self, frame: &GrayImage) -> Estimate;
 }
 
 /// A frame in the slot, with when it became available to the tracker.
@@ -88,7 +79,7 @@ impl PipelineShared {
 /// One telemetry row per tracked frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimateRecord {
-    pub estimate: PublishedEstimate,
+    pub estimate: Published,
     pub processing_ms: f64,
     pub true_force_nn: Option<f64>,
 }
@@ -147,7 +138,7 @@ pub fn spawn_frames(
 /// The tracker thread's ends of the slots.
 pub struct TrackerSide {
     pub frames: triple_buffer::Output<TimedFrame>,
-    pub estimates: triple_buffer::Input<PublishedEstimate>,
+    pub estimates: triple_buffer::Input<Published>,
     pub telemetry: rtrb::Producer<EstimateRecord>,
     /// Copies for the monitor and thumbnails (see [`super::snapshot`]), when wanted.
     pub snapshots: Option<SnapshotTap>,
@@ -167,7 +158,6 @@ pub fn run_tracker(
     let mut latency_ms = Histogram::new(0.01, 1000.0);
     let mut force: Option<ForceErrors> = None;
     let mut seq = 0u64;
-    let mut edges: EdgeSegments = [None; 3];
     while !shared.stop.load(Ordering::Relaxed) {
         if !side.frames.update() {
             thread::park_timeout(Duration::from_millis(20));
@@ -175,29 +165,36 @@ pub fn run_tracker(
         }
         let frame = side.frames.output_buffer_mut();
         let started_s = clock.now_s();
-        let estimate = estimator.estimate_with_edges(&frame.image, &mut edges);
+        let estimate = estimator.estimate(&frame.image);
         let published_s = clock.now_s();
         seq += 1;
-        let published = PublishedEstimate::new(seq, &frame.meta, published_s, &estimate);
+        let published = Published {
+            seq,
+            frame_sequence: frame.meta.sequence,
+            frame_time_s: frame.meta.captured_s,
+            published_s,
+            estimate,
+        };
         side.estimates.write(published);
         if let Some(stream) = side.stream.as_mut() {
             stream.offer(&published);
         }
         latency_ms.record((published_s - frame.available_s) * 1e3);
         shared.tracked.fetch_add(1, Ordering::Relaxed);
-        if published.detected {
+        let felt = estimate.felt_force_nn();
+        if felt.is_some() {
             shared.detected.fetch_add(1, Ordering::Relaxed);
         }
         let truth = frame.meta.truth.filter(|t| t.probe_in_view);
         if let Some(truth) = truth {
             let errors = force.get_or_insert_with(ForceErrors::default);
             errors.record_truth(truth.force_nn);
-            if published.detected {
-                errors.record_error(published.force_nn, truth.force_nn);
+            if let Some(force_nn) = felt {
+                errors.record_error(force_nn, truth.force_nn);
             }
         }
         if let Some(tap) = side.snapshots.as_mut() {
-            tap.offer(published_s, &frame.image, &published, &edges);
+            tap.offer(published_s, &frame.image, &published);
         }
         if let Some(tap) = side.recording.as_mut() {
             tap.offer(&frame.image, &frame.meta);

@@ -8,28 +8,23 @@
 //! first frame of a size; all drawing and encoding happen on the reader's thread.
 use image::GrayImage;
 
-use super::PublishedEstimate;
-
-/// Start and end of the red, blue and green edges found in a frame, pixels.
-pub type EdgeSegments = [Option<[[f64; 2]; 2]>; 3];
+use crate::control::Published;
 
 /// Ring size: ten seconds of estimates at 100 frames per second.
 const ESTIMATE_RING: usize = 1024;
 
-/// One frame as the tracker saw it.
+/// One frame as the tracker saw it, with its estimate (edges included).
 #[derive(Debug, Clone)]
 pub struct FrameSnapshot {
     pub image: GrayImage,
-    pub estimate: PublishedEstimate,
-    pub edges: EdgeSegments,
+    pub estimate: Published,
 }
 
 impl Default for FrameSnapshot {
     fn default() -> Self {
         FrameSnapshot {
             image: GrayImage::new(0, 0),
-            estimate: PublishedEstimate::default(),
-            edges: [None; 3],
+            estimate: Published::default(),
         }
     }
 }
@@ -37,7 +32,7 @@ impl Default for FrameSnapshot {
 /// The tracker's end.
 pub struct SnapshotTap {
     frames: triple_buffer::Input<FrameSnapshot>,
-    estimates: rtrb::Producer<PublishedEstimate>,
+    estimates: rtrb::Producer<Published>,
     every_s: f64,
     next_s: f64,
 }
@@ -45,7 +40,7 @@ pub struct SnapshotTap {
 /// The reader's end (the monitor thread).
 pub struct SnapshotReader {
     pub frames: triple_buffer::Output<FrameSnapshot>,
-    pub estimates: rtrb::Consumer<PublishedEstimate>,
+    pub estimates: rtrb::Consumer<Published>,
 }
 
 /// A tap that copies frames at most `frame_hz` times a second, and its reader.
@@ -68,13 +63,7 @@ pub fn snapshot_channel(frame_hz: f64) -> (SnapshotTap, SnapshotReader) {
 impl SnapshotTap {
     /// Offers one tracked frame at `now_s`; never blocks, allocates only when the frame
     /// size changes.
-    pub fn offer(
-        &mut self,
-        now_s: f64,
-        image: &GrayImage,
-        estimate: &PublishedEstimate,
-        edges: &EdgeSegments,
-    ) {
+    pub fn offer(&mut self, now_s: f64, image: &GrayImage, estimate: &Published) {
         let _ = self.estimates.push(*estimate);
         if now_s < self.next_s {
             return;
@@ -88,7 +77,6 @@ impl SnapshotTap {
         let slot = self.frames.input_buffer_mut();
         copy_frame(&mut slot.image, image);
         slot.estimate = *estimate;
-        slot.edges = *edges;
         self.frames.publish();
     }
 }
@@ -110,14 +98,20 @@ mod tests {
     fn frames_are_thinned_and_estimates_kept() {
         let (mut tap, mut reader) = snapshot_channel(5.0);
         let mut image = GrayImage::new(8, 4);
-        let edges = [Some([[1.0, 2.0], [3.0, 4.0]]), None, None];
+        let edge = crate::vision::EdgeFit {
+            start_px: [1.0, 2.0],
+            end_px: [3.0, 4.0],
+            support: 9,
+            contrast: 40.0,
+        };
         for k in 0..30u64 {
             image.put_pixel(0, 0, image::Luma([k as u8]));
-            let e = PublishedEstimate {
+            let mut e = Published {
                 seq: k + 1,
-                ..PublishedEstimate::default()
+                ..Published::default()
             };
-            tap.offer(k as f64 / 60.0, &image, &e, &edges);
+            e.estimate.edges[0] = Some(edge);
+            tap.offer(k as f64 / 60.0, &image, &e);
             if k == 0 {
                 assert!(reader.frames.update(), "the first frame is copied at once");
                 assert_eq!(
@@ -136,7 +130,7 @@ mod tests {
         // 30 frames at 60 Hz = 0.5 s: copies at 0, 0.2 and 0.4 s (frame 24).
         assert_eq!(last.estimate.seq, 25);
         assert_eq!(last.image.get_pixel(0, 0)[0], 24);
-        assert_eq!(last.edges, edges);
+        assert_eq!(last.estimate.estimate.edges, [Some(edge), None, None]);
     }
 
     #[test]
@@ -144,7 +138,7 @@ mod tests {
         let (mut tap, reader) = snapshot_channel(1.0);
         let image = GrayImage::new(2, 2);
         for _ in 0..ESTIMATE_RING + 10 {
-            tap.offer(0.0, &image, &PublishedEstimate::default(), &[None; 3]);
+            tap.offer(0.0, &image, &Published::default());
         }
         assert_eq!(reader.estimates.slots(), ESTIMATE_RING);
     }

@@ -24,8 +24,8 @@ use super::stats::{
 use super::stream::{self, StreamConfig, StreamHandle, StreamShared};
 use super::supervisor_health::Health;
 use super::telemetry::{self, Budget, Recorder, RecordingStatus};
-use super::PublishedEstimate;
 use crate::config::PixelOrigin;
+use crate::control::Published;
 use crate::control::{SafetyState, TeleopGains};
 use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
@@ -476,7 +476,7 @@ fn spawn_threads(
 ) -> anyhow::Result<Threads> {
     let devices = inject_panics(devices, options.inject.as_ref());
     let (frames_in, frames_out) = triple_buffer::triple_buffer(&TimedFrame::default());
-    let (estimates_in, estimates_out) = triple_buffer::triple_buffer(&PublishedEstimate::default());
+    let (estimates_in, estimates_out) = triple_buffer::triple_buffer(&Published::default());
     let (ticks_tx, ticks_rx) = rtrb::RingBuffer::new(TICK_RING);
     let (est_tx, est_rx) = rtrb::RingBuffer::new(ESTIMATE_RING);
     let (gains_tx, gains_rx) = rtrb::RingBuffer::new(4);

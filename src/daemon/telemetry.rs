@@ -446,14 +446,12 @@ fn write_estimate(
     anchor: &UtcAnchor,
 ) -> io::Result<()> {
     let e = &r.estimate;
-    let apex = origin.output(e.apex_px);
-    let opt = |v: f64| {
-        if v.is_finite() {
-            format!("{v}")
-        } else {
-            String::new()
-        }
-    };
+    // Shown as a detection only when the operator may feel it.
+    let felt = e.felt();
+    let apex = felt
+        .and_then(|f| f.apex_px)
+        .map_or([None; 2], |a| origin.output(a).map(Some));
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
     writeln!(
         out,
         "{},{},{:.6},{:.6},{},{},{},{},{},{:.4},{:.3},{},{}",
@@ -461,12 +459,12 @@ fn write_estimate(
         e.frame_sequence,
         e.frame_time_s,
         e.published_s,
-        u8::from(e.detected),
-        opt(e.angle_deg),
-        opt(e.force_nn),
+        u8::from(felt.is_some()),
+        opt(felt.and_then(|f| f.angle_deg)),
+        opt(felt.and_then(|f| f.force_nn)),
         opt(apex[0]),
         opt(apex[1]),
-        e.confidence,
+        e.estimate.confidence,
         r.processing_ms,
         r.true_force_nn.map_or(String::new(), |f| format!("{f}")),
         anchor.utc(e.frame_time_s)
@@ -525,21 +523,20 @@ mod tests {
     #[test]
     fn apex_columns_follow_the_pixel_origin() {
         let record = |detected: bool| EstimateRecord {
-            estimate: super::super::PublishedEstimate {
+            estimate: crate::control::Published {
                 seq: 7,
                 frame_sequence: 9,
                 frame_time_s: 1.0,
                 published_s: 1.02,
-                detected,
-                angle_deg: if detected { -1.5 } else { f64::NAN },
-                force_nn: if detected { -420.0 } else { f64::NAN },
-                apex_px: if detected {
-                    [300.25, 200.0]
-                } else {
-                    [f64::NAN; 2]
+                estimate: crate::vision::Estimate {
+                    detected,
+                    angle_deg: detected.then_some(-1.5),
+                    force_nn: detected.then_some(-420.0),
+                    apex_px: detected.then_some([300.25, 200.0]),
+                    confidence: 0.9,
+                    angle_sigma_deg: detected.then_some(0.02),
+                    ..Default::default()
                 },
-                confidence: 0.9,
-                angle_sigma_deg: if detected { 0.02 } else { f64::NAN },
             },
             processing_ms: 0.8,
             true_force_nn: None,

@@ -164,8 +164,10 @@ impl fmt::Display for Miss {
     }
 }
 
-/// What the tracker reports for one frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What the tracker reports for one frame: the one estimate type, carried whole from
+/// the tracker to the haptic loop, the live stream, the monitor and the CSVs. The
+/// default is a frame with nothing found and no reason given (nothing tracked yet).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Estimate {
     pub detected: bool,
     /// Tip rotation from the reference, degrees CCW on screen.
@@ -191,6 +193,15 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// The force this frame may put in the operator's hand: a detection whose force was
+    /// measured, finite and not clamped at the model's limit (a clamped force is not a
+    /// measurement). The one rule: the haptic loop feels only this, and the daemon's
+    /// outputs (stream, `estimates.csv`, monitor, stats) count a frame as detected by it.
+    pub fn felt_force_nn(&self) -> Option<f64> {
+        self.force_nn
+            .filter(|f| self.detected && !self.force_saturated && f.is_finite())
+    }
+
     /// The estimate with its pixels (apex, edge ends) counted from `origin`, for the
     /// numbers nanoforce writes out; drawing and tracking keep the pixel centre's.
     pub fn with_pixel_origin(mut self, origin: PixelOrigin) -> Estimate {

@@ -15,9 +15,9 @@ use serde_json::json;
 use super::server::Hub;
 use super::DaemonView;
 use crate::daemon::inject::PanicInjection;
-use crate::daemon::snapshot::{FrameSnapshot, SnapshotReader};
+use crate::daemon::snapshot::SnapshotReader;
 use crate::report::thumbs::{overlay_at_width, THUMB_WIDTH};
-use crate::vision::{EdgeFit, Estimate};
+use crate::vision::Estimate;
 
 /// Seconds of force history a new page starts with.
 const HISTORY_S: f64 = 30.0;
@@ -78,7 +78,7 @@ impl Producer {
         PanicInjection::check(self.view.inject.as_ref(), "monitor");
         self.steps += 1;
         while let Ok(e) = self.reader.estimates.pop() {
-            let force = if e.detected { e.force_nn } else { f64::NAN };
+            let force = e.estimate.felt_force_nn().unwrap_or(f64::NAN);
             self.fresh.push([e.frame_time_s, force]);
         }
         if self.reader.frames.update() && self.reader.frames.output_buffer_mut().image.width() > 0 {
@@ -99,26 +99,26 @@ impl Producer {
 
     fn take_frame(&mut self) {
         let snapshot = self.reader.frames.output_buffer_mut();
-        let estimate = estimate_of(snapshot);
-        let e = &snapshot.estimate;
+        let p = &snapshot.estimate;
+        let (estimate, felt) = (&p.estimate, p.felt());
         self.frame = Some(json!({
-            "seq": e.frame_sequence,
-            "t": e.frame_time_s,
-            "detected": e.detected,
-            "angle_deg": e.angle_deg,
-            "force_nn": e.force_nn,
-            "confidence": e.confidence,
+            "seq": p.frame_sequence,
+            "t": p.frame_time_s,
+            "detected": felt.is_some(),
+            "angle_deg": felt.and_then(|e| e.angle_deg),
+            "force_nn": felt.and_then(|e| e.force_nn),
+            "confidence": estimate.confidence,
             "width": snapshot.image.width(),
             "height": snapshot.image.height(),
         }));
         if self.serve {
             let width = snapshot.image.width().min(PAGE_FRAME_WIDTH);
-            if let Some(png) = png(&overlay_at_width(&snapshot.image, &estimate, width)) {
+            if let Some(png) = png(&overlay_at_width(&snapshot.image, estimate, width)) {
                 self.hub.set_frame(png);
             }
         }
         if let Some(thumbnails) = &mut self.thumbnails {
-            thumbnails.offer(&snapshot.image, &estimate, e.frame_sequence);
+            thumbnails.offer(&snapshot.image, estimate, p.frame_sequence);
         }
     }
 
@@ -189,31 +189,6 @@ impl Producer {
             self.hub
                 .set_hello(json!({ "force": history, "history_s": HISTORY_S }).to_string());
         }
-    }
-}
-
-/// The estimate a snapshot describes, for drawing.
-fn estimate_of(s: &FrameSnapshot) -> Estimate {
-    let e = &s.estimate;
-    let apex = Some(e.apex_px).filter(|a| e.detected && a.iter().all(|v| v.is_finite()));
-    Estimate {
-        detected: e.detected,
-        angle_deg: Some(e.angle_deg).filter(|a| a.is_finite()),
-        force_nn: Some(e.force_nn).filter(|f| f.is_finite()),
-        force_saturated: false,
-        apex_px: apex,
-        angle_sigma_deg: None,
-        edges: s.edges.map(|seg| {
-            seg.map(|[a, b]| EdgeFit {
-                start_px: a,
-                end_px: b,
-                support: 0,
-                contrast: 0.0,
-            })
-        }),
-        scale: None,
-        confidence: e.confidence,
-        miss: None,
     }
 }
 

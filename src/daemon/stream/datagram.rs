@@ -6,8 +6,8 @@ use std::fmt;
 use serde::{Serialize, Serializer};
 
 use crate::config::PixelOrigin;
+use crate::control::Published;
 use crate::daemon::haptic_loop::TickRecord;
-use crate::daemon::PublishedEstimate;
 use crate::session::utc::{civil_from_days, UtcAnchor};
 
 /// A Unix time printed as RFC 3339 UTC with microseconds: `2026-12-03T00:01:10.123456Z`.
@@ -92,8 +92,12 @@ pub struct Format {
 
 impl Format {
     /// Writes the datagram of a published estimate into `out` (cleared first).
-    pub fn estimate(&self, out: &mut Vec<u8>, e: &PublishedEstimate) {
-        let tip = self.pixel_origin.output(e.apex_px).map(known);
+    pub fn estimate(&self, out: &mut Vec<u8>, e: &Published) {
+        // Shown as a detection only when the operator may feel it.
+        let felt = e.felt();
+        let tip = felt
+            .and_then(|f| f.apex_px)
+            .map_or([None; 2], |a| self.pixel_origin.output(a).map(known));
         let unix_s = self.anchor.unix_ns(e.frame_time_s) as f64 * 1e-9;
         let datagram = EstimateDatagram {
             kind: "estimate",
@@ -102,13 +106,13 @@ impl Format {
             utc: Utc(unix_s),
             unix_s,
             t_s: e.frame_time_s,
-            detected: e.detected,
-            angle_deg: known(e.angle_deg),
-            force_nn: known(e.force_nn),
+            detected: felt.is_some(),
+            angle_deg: felt.and_then(|f| f.angle_deg),
+            force_nn: felt.and_then(|f| f.force_nn),
             tip_x: tip[0],
             tip_y: tip[1],
-            confidence: e.confidence,
-            angle_sigma_deg: known(e.angle_sigma_deg),
+            confidence: e.estimate.confidence,
+            angle_sigma_deg: felt.and_then(|f| f.angle_sigma_deg),
         };
         write(out, &datagram);
     }
@@ -143,6 +147,7 @@ fn write(out: &mut Vec<u8>, datagram: &impl Serialize) {
 mod tests {
     use super::*;
     use crate::control::SafetyState;
+    use crate::vision::Estimate;
 
     #[test]
     fn utc_is_rfc3339_with_microseconds() {
@@ -180,17 +185,19 @@ mod tests {
             pixel_origin: PixelOrigin::Corner,
         };
         let mut out = Vec::new();
-        let e = PublishedEstimate {
+        let e = Published {
             seq: 7,
             frame_sequence: 9,
             frame_time_s: 70.25,
             published_s: 70.26,
-            detected: true,
-            angle_deg: 1.5,
-            force_nn: 2500.0,
-            apex_px: [100.0, 200.0],
-            confidence: 0.875,
-            angle_sigma_deg: f64::NAN,
+            estimate: Estimate {
+                detected: true,
+                angle_deg: Some(1.5),
+                force_nn: Some(2500.0),
+                apex_px: Some([100.0, 200.0]),
+                confidence: 0.875,
+                ..Estimate::default()
+            },
         };
         format.estimate(&mut out, &e);
         let v = json(&out);
@@ -209,7 +216,7 @@ mod tests {
         );
         assert!(v["angle_sigma_deg"].is_null());
         // Not detected: what is unknown is null.
-        format.estimate(&mut out, &PublishedEstimate::default());
+        format.estimate(&mut out, &Published::default());
         let v = json(&out);
         assert_eq!(v["detected"], false);
         for key in ["angle_deg", "force_nN", "tip_x", "tip_y", "angle_sigma_deg"] {

@@ -21,9 +21,9 @@ use serde::Serialize;
 
 use self::datagram::Format;
 use super::haptic_loop::TickRecord;
-use super::PublishedEstimate;
 use crate::config::PixelOrigin;
 pub use crate::config::StreamConfig;
+use crate::control::Published;
 use crate::session::utc::UtcAnchor;
 
 /// Records the rings hold: about 4 s of estimates at 60 frames/s, 1 s of haptic
@@ -72,14 +72,14 @@ impl StreamShared {
 
 /// The tracker's end: one record per published estimate.
 pub struct EstimateTap {
-    ring: rtrb::Producer<PublishedEstimate>,
+    ring: rtrb::Producer<Published>,
     shared: Arc<StreamShared>,
     stream: Thread,
 }
 
 impl EstimateTap {
     /// Hands the estimate over without waiting; wakes the stream thread.
-    pub fn offer(&mut self, estimate: &PublishedEstimate) {
+    pub fn offer(&mut self, estimate: &Published) {
         if self.ring.push(*estimate).is_err() {
             self.shared
                 .estimates_dropped
@@ -233,7 +233,7 @@ fn open_socket(target: SocketAddr) -> io::Result<UdpSocket> {
 struct Sender {
     socket: UdpSocket,
     target: SocketAddr,
-    estimates: rtrb::Consumer<PublishedEstimate>,
+    estimates: rtrb::Consumer<Published>,
     haptic: rtrb::Consumer<TickRecord>,
     format: Format,
     shared: Arc<StreamShared>,
@@ -432,10 +432,10 @@ mod tests {
         let anchor = UtcAnchor::measure(&clock);
         let mut started = start(&config, shared.clone(), anchor, PixelOrigin::Centre).unwrap();
         for seq in 1..=20 {
-            let estimate = PublishedEstimate {
+            let estimate = Published {
                 seq,
                 frame_time_s: clock.now_s(),
-                ..PublishedEstimate::default()
+                ..Published::default()
             };
             started.estimates.offer(&estimate);
             thread::sleep(Duration::from_millis(2));
