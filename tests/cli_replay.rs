@@ -224,7 +224,10 @@ fn corrupt_frames_are_reported_and_skipped() {
     let text = std::fs::read_to_string(&csv).unwrap();
     let rows: Vec<&str> = text.lines().skip(1).collect();
     assert_eq!(rows.len(), 4);
-    assert!(rows[1].starts_with("frame_00001.png,0,,,,,") && rows[1].ends_with("unreadable,2,"));
+    // Unreadable, frame 2 of the folder; no time, nothing published, not felt.
+    assert!(
+        rows[1].starts_with("frame_00001.png,0,,,,,") && rows[1].ends_with("unreadable,2,,,,,,,0")
+    );
     assert!(rows[2].starts_with("frame_00002.tif,0,"));
     assert!(rows[0].starts_with("frame_00000.png,1,") && rows[3].starts_with("frame_00003.png,1,"));
 }

@@ -110,20 +110,22 @@ fn a_recorded_live_run_replays_to_the_same_estimates() {
             differences.push(format!("frame {} not recorded", row["frame_seq"]));
             continue;
         };
-        // The daemon publishes a detection only with a force that is not clamped.
-        let again_detected = again["detected"] == "1" && again["force_saturated"] == "0";
+        // One schema: detection and the force felt read alike.
+        let again_detected = again["detected"] == "1";
         let live_detected = row["detected"] == "1";
         let angles = (
             row["angle_deg"].parse::<f64>(),
             again["angle_deg"].parse::<f64>(),
         );
-        let matches = match (live_detected, again_detected, angles) {
-            (true, true, (Ok(a), Ok(b))) => (a - b).abs() <= 1e-6,
-            (false, false, _) => true,
-            _ => false,
-        };
+        let matches = row["felt"] == again["felt"]
+            && match (live_detected, again_detected, angles) {
+                (true, true, (Ok(a), Ok(b))) => (a - b).abs() <= 1e-6,
+                (false, false, _) => true,
+                _ => false,
+            };
         // The frame's capture time, anchored in UTC, is the same in both files.
         assert_eq!(row["utc"], again["utc"], "frame {}", row["frame_seq"]);
+        assert_eq!(row["frame_time_s"], again["frame_time_s"]);
         detected += usize::from(live_detected);
         if matches {
             same += 1;

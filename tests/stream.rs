@@ -116,8 +116,9 @@ fn number(v: &Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("{key} is not a number: {v}"))
 }
 
-/// A number when `known`, else null; checked against the CSV cell (empty when unknown).
-fn check_against_csv(v: &Value, key: &str, cell: &str, known: bool, tolerance: f64) {
+/// A number when `known`, else null; checked against the CSV cell (empty when unknown),
+/// which prints it to `decimals` places.
+fn check_against_csv(v: &Value, key: &str, cell: &str, known: bool, decimals: i32) {
     if !known {
         assert!(v[key].is_null(), "{key} must be null: {v}");
         return;
@@ -127,7 +128,7 @@ fn check_against_csv(v: &Value, key: &str, cell: &str, known: bool, tolerance: f
         .parse()
         .unwrap_or_else(|_| panic!("{key}: csv {cell:?}"));
     assert!(
-        (got - want).abs() <= tolerance * want.abs().max(1.0),
+        (got - want).abs() <= 0.5 * 10f64.powi(-decimals) * (1.0 + 1e-9) + 1e-12 * want.abs(),
         "{key}: datagram {got}, estimates.csv {want}"
     );
 }
@@ -202,13 +203,17 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
         let is_detected = v["detected"].as_bool().unwrap_or_else(|| panic!("{v}"));
         assert_eq!(row["detected"], if is_detected { "1" } else { "0" });
         detected += usize::from(is_detected);
-        // The CSV prints the capture time to the microsecond, the rest in full.
-        check_against_csv(v, "t_s", &row["frame_time_s"], true, 1e-6);
-        check_against_csv(v, "force_nN", &row["force_nN"], is_detected, 1e-12);
-        check_against_csv(v, "angle_deg", &row["angle_deg"], is_detected, 1e-12);
-        check_against_csv(v, "tip_x", &row["tip_x"], is_detected, 1e-12);
-        check_against_csv(v, "tip_y", &row["tip_y"], is_detected, 1e-12);
-        check_against_csv(v, "confidence", &row["confidence"], true, 1e-4);
+        // The datagram in full, the CSV to its places.
+        check_against_csv(v, "t_s", &row["frame_time_s"], true, 6);
+        check_against_csv(v, "force_nN", &row["force_nN"], is_detected, 4);
+        check_against_csv(v, "angle_deg", &row["angle_deg"], is_detected, 6);
+        check_against_csv(v, "tip_x", &row["tip_x"], is_detected, 3);
+        check_against_csv(v, "tip_y", &row["tip_y"], is_detected, 3);
+        check_against_csv(v, "confidence", &row["confidence"], true, 4);
+        for key in ["force_saturated", "felt"] {
+            let flag = v[key].as_bool().unwrap_or_else(|| panic!("{key}: {v}"));
+            assert_eq!(row[key], if flag { "1" } else { "0" }, "{key}: {v}");
+        }
         let confidence = number(v, "confidence");
         assert!((0.0..=1.0).contains(&confidence), "{v}");
         let sigma = &v["angle_sigma_deg"];
@@ -227,7 +232,7 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
         );
         assert_eq!(
             v.as_object().unwrap().len(),
-            13,
+            15,
             "no field more or less: {v}"
         );
     }

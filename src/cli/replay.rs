@@ -48,8 +48,10 @@ reference pixel), force_saturated, red/blue/green_support (edge pixels), px_per_
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
-pixels), miss (why not detected), frame_seq, utc and, with --timing, processing_ms. \
-Without --timing the \
+pixels), miss (why not detected), frame_seq, utc and frame_time_s (a recorded frame's \
+capture time), processing_ms (with --timing), seq, published_s and true_force_nN (empty: \
+only a live run's estimates.csv, which has these same columns, fills them) and felt \
+(1: a force the operator may feel, detected and not clamped). Without --timing the \
 CSV is identical from run to run.\n\n\
 Overlays (--overlay DIR) are PNG files named after their frame: a PNG frame keeps its \
 name (frame_00001.png), any other frame gets its full name plus .png (frame_00001.tif \
@@ -79,7 +81,7 @@ pub struct ReplayArgs {
     /// Track every frame from scratch (no search centred on the previous estimate).
     #[arg(long)]
     pub no_coherence: bool,
-    /// Add a processing_ms column (makes the CSV differ between runs).
+    /// Fill the processing_ms column (makes the CSV differ between runs).
     #[arg(long)]
     pub timing: bool,
     /// Threads that track (default: every core this process may use). The CSV is the
@@ -191,7 +193,7 @@ fn write_results(
     let file =
         File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
     let mut csv = BufWriter::new(file);
-    writeln!(csv, "{}", results::header(args.timing))?;
+    writeln!(csv, "{}", results::header())?;
     let progress = progress_bar(frames.count());
     let job = Job {
         frames,

@@ -19,7 +19,7 @@ use crate::hw::frames::pipe::FrameHeader;
 use crate::hw::frames::recording::FrameFile;
 use crate::session::frames::load_gray;
 use crate::session::metadata::{read_sem_metadata, SemMetadata};
-use crate::session::results::{self, FrameLabel};
+use crate::session::results::{self, FrameLabel, RowExtras};
 use crate::session::utc::UtcAnchor;
 use crate::vision::{draw_overlay, Tracker};
 
@@ -180,7 +180,7 @@ fn track_chunk(
     let mut image = GrayImage::new(0, 0);
     for i in from..end {
         let output = i >= start;
-        let (loaded, name, seq, utc, path) = match job.frames {
+        let (loaded, name, seq, utc, time_s, path) = match job.frames {
             Frames::Files(files) => {
                 let path = &files[i];
                 let name = path
@@ -189,7 +189,7 @@ fn track_chunk(
                 let loaded = load_gray(path)
                     .map(|img| image = img)
                     .map_err(|e| e.to_string());
-                (loaded, name, i as u64 + 1, String::new(), Some(path))
+                (loaded, name, i as u64 + 1, String::new(), None, Some(path))
             }
             Frames::Recorded {
                 path,
@@ -200,15 +200,16 @@ fn track_chunk(
                 let raw = file.as_ref().context("the frames file")?;
                 let loaded = FrameFile::read_at(raw, header, *offset, &mut image)
                     .map_err(|e| format!("{}: frame {}: {e}", path.display(), header.sequence));
-                let utc = match header.capture_ns {
-                    0 => String::new(),
-                    ns => anchor.utc(anchor.seconds_at(ns)),
+                let time_s = match header.capture_ns {
+                    0 => None,
+                    ns => Some(anchor.seconds_at(ns)),
                 };
                 (
                     loaded,
                     header.sequence.to_string(),
                     header.sequence,
-                    utc,
+                    time_s.map_or_else(String::new, |t| anchor.utc(t)),
+                    time_s,
                     None,
                 )
             }
@@ -217,6 +218,7 @@ fn track_chunk(
             name: &name,
             seq,
             utc: &utc,
+            time_s,
         };
         if let Err(e) = &loaded {
             // Coherence must not carry over a gap in the sequence.
@@ -225,7 +227,7 @@ fn track_chunk(
                 tracing::warn!("{e}; recorded as not detected");
                 chunk.counts.frames += 1;
                 chunk.counts.unreadable += 1;
-                results::write_unreadable(&mut chunk.csv, &label, job.timing)?;
+                results::write_unreadable(&mut chunk.csv, &label)?;
             }
             continue;
         }
@@ -243,8 +245,11 @@ fn track_chunk(
         chunk.counts.detected += usize::from(estimate.detected);
         chunk.counts.times_ms.push(ms);
         let written = estimate.with_pixel_origin(tracker.pixel_origin());
-        let ms_column = job.timing.then_some(ms);
-        results::write_row(&mut chunk.csv, &label, &written, &sem, ms_column)?;
+        let extras = RowExtras {
+            processing_ms: job.timing.then_some(ms),
+            ..RowExtras::default()
+        };
+        results::write_row(&mut chunk.csv, &label, &written, &sem, &extras)?;
         if let Some(dir) = job.overlay {
             let out = dir.join(&job.overlay_names[i]);
             draw_overlay(&image, &estimate)

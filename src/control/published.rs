@@ -29,14 +29,6 @@ impl Default for Published {
     }
 }
 
-impl Published {
-    /// The estimate when the operator may feel it ([`Estimate::felt_force_nn`]): what
-    /// the daemon's outputs show as a detection, with its angle, apex and sigma.
-    pub fn felt(&self) -> Option<&Estimate> {
-        self.estimate.felt_force_nn().map(|_| &self.estimate)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -51,13 +43,7 @@ mod tests {
             confidence: 0.9,
             ..Estimate::default()
         };
-        let published = |estimate| Published {
-            seq: 1,
-            estimate,
-            ..Published::default()
-        };
         assert_eq!(found.felt_force_nn(), Some(120.0));
-        assert_eq!(published(found).felt(), Some(&found));
         for (why, e) in [
             (
                 "not detected",
@@ -89,8 +75,7 @@ mod tests {
             ),
         ] {
             assert_eq!(e.felt_force_nn(), None, "{why}");
-            assert_eq!(published(e).felt(), None, "{why}");
         }
-        assert_eq!(Published::default().felt(), None);
+        assert_eq!(Published::default().estimate.felt_force_nn(), None);
     }
 }

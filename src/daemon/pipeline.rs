@@ -181,10 +181,10 @@ pub fn run_tracker(
         }
         latency_ms.record((published_s - frame.available_s) * 1e3);
         shared.tracked.fetch_add(1, Ordering::Relaxed);
-        let felt = estimate.felt_force_nn();
-        if felt.is_some() {
+        if estimate.detected {
             shared.detected.fetch_add(1, Ordering::Relaxed);
         }
+        let felt = estimate.felt_force_nn();
         let truth = frame.meta.truth.filter(|t| t.probe_in_view);
         if let Some(truth) = truth {
             let errors = force.get_or_insert_with(ForceErrors::default);

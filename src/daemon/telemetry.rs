@@ -5,10 +5,11 @@
 //!
 //! A session folder holds `config.toml` (the configuration the run used),
 //! `session.json` (the UTC time of t = 0, see [`UtcAnchor`]), `ticks.csv` (the haptic
-//! loop, decimated), `estimates.csv` (one row per tracked frame), `events.log` (faults
-//! and state changes, written as they happen) and `frames.nfrm` (the frames the tracker
-//! saw, written by [`super::frame_record`]). Both CSVs end with a `utc` column: the
-//! row's time (`t_s`, `frame_time_s`) in UTC.
+//! loop, decimated), `estimates.csv` (one row per tracked frame, in the one estimate
+//! schema of a replay's CSV: [`crate::session::results`]), `events.log` (faults and
+//! state changes, written as they happen) and `frames.nfrm` (the frames the tracker
+//! saw, written by [`super::frame_record`]). Both CSVs have a `utc` column: the row's
+//! time (`t_s`, `frame_time_s`) in UTC.
 //!
 //! A write that fails (a full disk) stops the recording and says so; the loops go on.
 //! `[daemon] recordings_max_mb` bounds the sessions: the oldest are deleted at start
@@ -27,6 +28,8 @@ use super::inject::PanicInjection;
 use super::pipeline::EstimateRecord;
 use crate::config::PixelOrigin;
 use crate::session::live::{SessionInfo, SESSION_FILE};
+use crate::session::metadata::SemMetadata;
+use crate::session::results::{self, FrameLabel, RowExtras};
 use crate::session::utc::{civil_from_days, UtcAnchor};
 
 /// The state directory: `$STATE_DIRECTORY` (set by systemd's StateDirectory=), else
@@ -218,11 +221,7 @@ impl Files {
              vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
              gate_attenuated,utc"
         )?;
-        writeln!(
-            files.estimates,
-            "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
-             confidence,processing_ms,true_force_nN,utc"
-        )?;
+        writeln!(files.estimates, "{}", results::header())?;
         writeln!(
             files.events,
             "session start: t = 0 s is {} UTC (CLOCK_MONOTONIC {:.9} s)",
@@ -439,36 +438,28 @@ fn write_tick(out: &mut impl Write, r: &TickRecord, anchor: &UtcAnchor) -> io::R
     )
 }
 
+/// One row of `estimates.csv`, in the one estimate schema ([`results::COLUMNS`]).
 fn write_estimate(
     out: &mut impl Write,
     r: &EstimateRecord,
     origin: PixelOrigin,
     anchor: &UtcAnchor,
 ) -> io::Result<()> {
-    let e = &r.estimate;
-    // Shown as a detection only when the operator may feel it.
-    let felt = e.felt();
-    let apex = felt
-        .and_then(|f| f.apex_px)
-        .map_or([None; 2], |a| origin.output(a).map(Some));
-    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
-    writeln!(
-        out,
-        "{},{},{:.6},{:.6},{},{},{},{},{},{:.4},{:.3},{},{}",
-        e.seq,
-        e.frame_sequence,
-        e.frame_time_s,
-        e.published_s,
-        u8::from(felt.is_some()),
-        opt(felt.and_then(|f| f.angle_deg)),
-        opt(felt.and_then(|f| f.force_nn)),
-        opt(apex[0]),
-        opt(apex[1]),
-        e.estimate.confidence,
-        r.processing_ms,
-        r.true_force_nn.map_or(String::new(), |f| format!("{f}")),
-        anchor.utc(e.frame_time_s)
-    )
+    let p = &r.estimate;
+    let (name, utc) = (p.frame_sequence.to_string(), anchor.utc(p.frame_time_s));
+    let frame = FrameLabel {
+        name: &name,
+        seq: p.frame_sequence,
+        utc: &utc,
+        time_s: Some(p.frame_time_s),
+    };
+    let extras = RowExtras {
+        processing_ms: Some(r.processing_ms),
+        published: Some((p.seq, p.published_s)),
+        true_force_nn: r.true_force_nn,
+    };
+    let estimate = p.estimate.with_pixel_origin(origin);
+    results::write_row(out, &frame, &estimate, &SemMetadata::default(), &extras)
 }
 
 #[cfg(test)]
@@ -552,15 +543,25 @@ mod tests {
         };
         let centre = line(&record(true), PixelOrigin::Centre);
         let corner = line(&record(true), PixelOrigin::Corner);
-        assert!(centre.contains(",-420,300.25,200,0.9000,"), "{centre}");
-        assert!(corner.contains(",-420,300.75,200.5,0.9000,"), "{corner}");
+        assert!(
+            centre.starts_with("9,1,-1.500000,-420.0000,300.250,200.000,0.9000,"),
+            "{centre}"
+        );
+        assert!(
+            corner.contains(",-420.0000,300.750,200.500,0.9000,"),
+            "{corner}"
+        );
+        // The frame, its times, the publication and whether the force may be felt.
+        assert!(
+            centre.ends_with(",9,2026-12-03T00:01:09.000000Z,1.000000,0.800,7,1.020000,,1\n"),
+            "{centre}"
+        );
         // No apex stays empty whichever the origin.
         let missed = line(&record(false), PixelOrigin::Corner);
-        assert!(missed.contains(",0,,,,,0.9000,"), "{missed}");
-        // The frame's capture time in UTC ends the row.
-        assert!(
-            missed.ends_with(",0.9000,0.800,,2026-12-03T00:01:09.000000Z\n"),
-            "{missed}"
-        );
+        assert!(missed.starts_with("9,0,,,,,0.9000,"), "{missed}");
+        assert!(missed.ends_with(",0.800,7,1.020000,,0\n"), "{missed}");
+        // One schema with the replay's CSV.
+        let cells = missed.trim_end().split(',').count();
+        assert_eq!(cells, results::COLUMNS.len());
     }
 }

@@ -272,7 +272,7 @@ mod tests {
     #[test]
     fn replayed_pixels_come_back_to_scene_frame() {
         let dir = tempfile::tempdir().unwrap();
-        let header = crate::session::results::header(false);
+        let header = crate::session::results::header();
         let cells = header.split(',').count();
         let mut row = vec![String::new(); cells];
         for (i, v) in ["f0.png", "1", "1.5", "300.0", "100.5", "200.75"]

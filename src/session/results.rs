@@ -1,15 +1,19 @@
-//! The results CSV of a replay: one row per frame. The first six columns are fixed
+//! The estimate CSV: one row per frame, one schema ([`COLUMNS`]) for a replay's results
+//! and a live run's `estimates.csv`, written here only. The first six columns are fixed
 //! (`frame, detected, angle_deg, force_nN, tip_x, tip_y`, empty when not detected), the
 //! rest describe the estimate: confidence, the angle's standard error from the frame's
-//! noise and the calibration's (`angle_sigma_deg`), scale, the edges' support, the SEM's
-//! scale from the frame's metadata (`px_per_um`, `magnification`, the apex in
-//! micrometres: empty without metadata), the found edge segments
-//! (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for pictures), `miss`, and where
-//! the frame came from: `frame_seq` (a recorded session's frame sequence number, as in
-//! its `estimates.csv`; a folder's frames count 1, 2, ... in file-name order) and `utc`
-//! (a recorded frame's capture time, ISO 8601 UTC; empty for a folder of frames).
-//! Without timing the file is a pure function of the frames and the configuration: a
-//! replay run twice gives byte-identical output.
+//! noise and the calibration's (`angle_sigma_deg`), scale, whether the force is clamped
+//! at the model's limit, the edges' support, the SEM's scale from the frame's metadata
+//! (`px_per_um`, `magnification`, the apex in micrometres: empty without metadata), the
+//! found edge segments (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for
+//! pictures), `miss`, where the frame came from (`frame_seq`: a recorded frame's
+//! sequence number, a folder's frames count 1, 2, ... in file-name order; `utc` and
+//! `frame_time_s`: its capture time, ISO 8601 UTC and on the recording's clock, empty
+//! for a folder of frames), the tracker's time on it (`processing_ms`: every live run,
+//! a replay with `--timing`), what only a live run knows (`seq` and `published_s`, its
+//! publication; `true_force_nN`, the simulator's truth), and `felt`: 1 when the operator
+//! may feel the force ([`Estimate::felt_force_nn`]). Without timing a replay's file is a
+//! pure function of the frames and the configuration: run twice, it is byte-identical.
 //! [`read_results`] reads it back (for `report`).
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
@@ -18,19 +22,63 @@ use super::csv::Table;
 use super::metadata::SemMetadata;
 use crate::vision::{Edge, EdgeFit, Estimate, Miss};
 
-/// The header; `timing` adds `processing_ms` (which varies from run to run).
-pub fn header(timing: bool) -> String {
-    let mut h = String::from(
-        "frame,detected,angle_deg,force_nN,tip_x,tip_y,confidence,angle_sigma_deg,scale,\
-         force_saturated,\
-         red_support,blue_support,green_support,px_per_um,magnification,tip_x_um,tip_y_um,\
-         red_x0,red_y0,red_x1,red_y1,blue_x0,blue_y0,blue_x1,blue_y1,\
-         green_x0,green_y0,green_x1,green_y1,miss,frame_seq,utc",
-    );
-    if timing {
-        h.push_str(",processing_ms");
-    }
-    h
+/// The columns of every estimate CSV nanoforce writes (a replay's results and a run's
+/// `estimates.csv`), in order; docs/operations.md says what each holds.
+pub const COLUMNS: [&str; 38] = [
+    "frame",
+    "detected",
+    "angle_deg",
+    "force_nN",
+    "tip_x",
+    "tip_y",
+    "confidence",
+    "angle_sigma_deg",
+    "scale",
+    "force_saturated",
+    "red_support",
+    "blue_support",
+    "green_support",
+    "px_per_um",
+    "magnification",
+    "tip_x_um",
+    "tip_y_um",
+    "red_x0",
+    "red_y0",
+    "red_x1",
+    "red_y1",
+    "blue_x0",
+    "blue_y0",
+    "blue_x1",
+    "blue_y1",
+    "green_x0",
+    "green_y0",
+    "green_x1",
+    "green_y1",
+    "miss",
+    "frame_seq",
+    "utc",
+    "frame_time_s",
+    "processing_ms",
+    "seq",
+    "published_s",
+    "true_force_nN",
+    "felt",
+];
+
+/// The header line (without its line break).
+pub fn header() -> String {
+    COLUMNS.join(",")
+}
+
+/// What a row holds besides the frame's estimate: the tracker's time on it (a replay
+/// with `--timing`, and every live run), and what only a live run knows: its
+/// publication sequence and time, and the simulator's true force.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RowExtras {
+    pub processing_ms: Option<f64>,
+    /// The daemon's publication: sequence number and time (daemon clock, seconds).
+    pub published: Option<(u64, f64)>,
+    pub true_force_nn: Option<f64>,
 }
 
 /// Why there is no estimate, as written in the `miss` column.
@@ -46,6 +94,8 @@ pub struct FrameLabel<'a> {
     pub seq: u64,
     /// The capture time, ISO 8601 UTC (empty: unknown).
     pub utc: &'a str,
+    /// The capture time on the recording's monotonic clock, seconds (None: unknown).
+    pub time_s: Option<f64>,
 }
 
 /// One row for a tracked frame; `sem` is the frame's metadata (may be empty).
@@ -54,7 +104,7 @@ pub fn write_row(
     frame: &FrameLabel,
     e: &Estimate,
     sem: &SemMetadata,
-    processing_ms: Option<f64>,
+    extras: &RowExtras,
 ) -> io::Result<()> {
     let fixed = |v: Option<f64>, digits: usize| match v.filter(|v| v.is_finite() && e.detected) {
         Some(v) => format!("{v:.digits$}"),
@@ -83,10 +133,23 @@ pub fn write_row(
         frame.seq,
         frame.utc,
     )?;
-    if let Some(ms) = processing_ms {
-        write!(out, ",{ms:.3}")?;
-    }
-    writeln!(out)
+    write_stamps(out, frame, extras)?;
+    writeln!(out, ",{}", u8::from(e.felt_force_nn().is_some()))
+}
+
+/// `frame_time_s,processing_ms,seq,published_s,true_force_nN`, each empty when unknown.
+fn write_stamps(out: &mut impl Write, frame: &FrameLabel, x: &RowExtras) -> io::Result<()> {
+    let opt = |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
+    write!(
+        out,
+        ",{},{},{},{},{}",
+        opt(frame.time_s, 6),
+        opt(x.processing_ms, 3),
+        x.published
+            .map_or(String::new(), |(seq, _)| seq.to_string()),
+        opt(x.published.map(|(_, t)| t), 6),
+        x.true_force_nn.map_or(String::new(), |f| format!("{f}")),
+    )
 }
 
 /// `px_per_um,magnification,tip_x_um,tip_y_um`.
@@ -123,7 +186,7 @@ fn edge_columns(edges: &[Option<EdgeFit>; 3]) -> String {
 }
 
 /// A row for a frame that could not be decoded: not detected, reason in `miss`.
-pub fn write_unreadable(out: &mut impl Write, frame: &FrameLabel, timing: bool) -> io::Result<()> {
+pub fn write_unreadable(out: &mut impl Write, frame: &FrameLabel) -> io::Result<()> {
     write!(
         out,
         "{},0,,,,,0.0000,,,0,0,0,0{}unreadable,{},{}",
@@ -133,10 +196,8 @@ pub fn write_unreadable(out: &mut impl Write, frame: &FrameLabel, timing: bool) 
         frame.seq,
         frame.utc
     )?;
-    if timing {
-        write!(out, ",")?;
-    }
-    writeln!(out)
+    write_stamps(out, frame, &RowExtras::default())?;
+    writeln!(out, ",0")
 }
 
 /// Quotes a field that holds a comma, quote or line break.
@@ -293,31 +354,32 @@ mod tests {
             name,
             seq: 3,
             utc: "",
+            time_s: None,
         };
         write_row(
             &mut out,
             &label("f.png"),
             &Estimate::missed(Miss::Inconsistent, 0.2),
             &sem,
-            None,
+            &RowExtras::default(),
         )
         .unwrap();
         assert_eq!(
             String::from_utf8(out).unwrap(),
             format!(
-                "f.png,0,,,,,0.2000,,,0,0,0,0,10.00000,2000.0,,,{}inconsistent,3,\n",
+                "f.png,0,,,,,0.2000,,,0,0,0,0,10.00000,2000.0,,,{}inconsistent,3,,,,,,,0\n",
                 ",".repeat(12)
             )
         );
         let mut out = Vec::new();
-        write_unreadable(&mut out, &label("a,b.png"), true).unwrap();
+        write_unreadable(&mut out, &label("a,b.png")).unwrap();
         let line = String::from_utf8(out).unwrap();
-        assert!(line.ends_with(",unreadable,3,,\n"), "{line}");
-        let columns = header(true).split(',').count();
-        assert_eq!(columns, 33);
+        assert!(line.ends_with(",unreadable,3,,,,,,,0\n"), "{line}");
+        let columns = header().split(',').count();
+        assert_eq!(columns, COLUMNS.len());
         let cells = &super::super::csv::records(&line).unwrap()[0].cells;
         assert_eq!(cells.len(), columns);
-        let rows = parse_results(&format!("{}\n{line}", header(true))).unwrap();
+        let rows = parse_results(&format!("{}\n{line}", header())).unwrap();
         assert_eq!(rows[0].frame, "a,b.png");
         assert!(!rows[0].detected && rows[0].tip_px.is_none());
         assert_eq!(rows[0].miss, "unreadable");
@@ -353,14 +415,19 @@ mod tests {
             magnification: Some(4000.0),
             ..SemMetadata::default()
         };
-        let mut out = header(true).into_bytes();
+        let mut out = header().into_bytes();
         out.push(b'\n');
         let label = FrameLabel {
             name: "f.tif",
             seq: 17,
             utc: "2026-12-03T00:01:08.123456Z",
+            time_s: Some(68.123456),
         };
-        write_row(&mut out, &label, &estimate, &sem, Some(3.25)).unwrap();
+        let extras = RowExtras {
+            processing_ms: Some(3.25),
+            ..RowExtras::default()
+        };
+        write_row(&mut out, &label, &estimate, &sem, &extras).unwrap();
         let text = String::from_utf8(out).unwrap();
         let row = text.lines().nth(1).unwrap();
         assert!(row.contains(",20.00000,4000.0,16.0250,12.0125,"), "{row}");
@@ -376,7 +443,7 @@ mod tests {
         assert_eq!(r.processing_ms, Some(3.25));
         assert_eq!(r.frame_seq, Some(17));
         assert!(
-            row.ends_with(",17,2026-12-03T00:01:08.123456Z,3.250"),
+            row.ends_with(",17,2026-12-03T00:01:08.123456Z,68.123456,3.250,,,,1"),
             "{row}"
         );
     }

@@ -195,8 +195,8 @@ pub struct Estimate {
 impl Estimate {
     /// The force this frame may put in the operator's hand: a detection whose force was
     /// measured, finite and not clamped at the model's limit (a clamped force is not a
-    /// measurement). The one rule: the haptic loop feels only this, and the daemon's
-    /// outputs (stream, `estimates.csv`, monitor, stats) count a frame as detected by it.
+    /// measurement). The one rule: the haptic loop feels only this, and every output
+    /// (the estimate CSV, the stream, the monitor) shows it as `felt` beside `detected`.
     pub fn felt_force_nn(&self) -> Option<f64> {
         self.force_nn
             .filter(|f| self.detected && !self.force_saturated && f.is_finite())

@@ -100,13 +100,15 @@ impl Producer {
     fn take_frame(&mut self) {
         let snapshot = self.reader.frames.output_buffer_mut();
         let p = &snapshot.estimate;
-        let (estimate, felt) = (&p.estimate, p.felt());
+        let estimate = &p.estimate;
+        let shown = |v: Option<f64>| v.filter(|_| estimate.detected);
         self.frame = Some(json!({
             "seq": p.frame_sequence,
             "t": p.frame_time_s,
-            "detected": felt.is_some(),
-            "angle_deg": felt.and_then(|e| e.angle_deg),
-            "force_nn": felt.and_then(|e| e.force_nn),
+            "detected": estimate.detected,
+            "felt": estimate.felt_force_nn().is_some(),
+            "angle_deg": shown(estimate.angle_deg),
+            "force_nn": shown(estimate.force_nn),
             "confidence": estimate.confidence,
             "width": snapshot.image.width(),
             "height": snapshot.image.height(),

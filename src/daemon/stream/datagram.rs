@@ -62,6 +62,8 @@ struct EstimateDatagram {
     tip_y: Option<f64>,
     confidence: f64,
     angle_sigma_deg: Option<f64>,
+    force_saturated: bool,
+    felt: bool,
 }
 
 #[derive(Serialize)]
@@ -92,27 +94,31 @@ pub struct Format {
 
 impl Format {
     /// Writes the datagram of a published estimate into `out` (cleared first).
-    pub fn estimate(&self, out: &mut Vec<u8>, e: &Published) {
-        // Shown as a detection only when the operator may feel it.
-        let felt = e.felt();
-        let tip = felt
-            .and_then(|f| f.apex_px)
+    pub fn estimate(&self, out: &mut Vec<u8>, p: &Published) {
+        // As the estimate CSV shows it: values of a detection only.
+        let e = &p.estimate;
+        let shown = |v: Option<f64>| v.filter(|v| e.detected && v.is_finite());
+        let tip = e
+            .apex_px
+            .filter(|_| e.detected)
             .map_or([None; 2], |a| self.pixel_origin.output(a).map(known));
-        let unix_s = self.anchor.unix_ns(e.frame_time_s) as f64 * 1e-9;
+        let unix_s = self.anchor.unix_ns(p.frame_time_s) as f64 * 1e-9;
         let datagram = EstimateDatagram {
             kind: "estimate",
-            seq: e.seq,
-            frame_seq: e.frame_sequence,
+            seq: p.seq,
+            frame_seq: p.frame_sequence,
             utc: Utc(unix_s),
             unix_s,
-            t_s: e.frame_time_s,
-            detected: felt.is_some(),
-            angle_deg: felt.and_then(|f| f.angle_deg),
-            force_nn: felt.and_then(|f| f.force_nn),
+            t_s: p.frame_time_s,
+            detected: e.detected,
+            angle_deg: shown(e.angle_deg),
+            force_nn: shown(e.force_nn),
             tip_x: tip[0],
             tip_y: tip[1],
-            confidence: e.estimate.confidence,
-            angle_sigma_deg: felt.and_then(|f| f.angle_sigma_deg),
+            confidence: e.confidence,
+            angle_sigma_deg: shown(e.angle_sigma_deg),
+            force_saturated: e.force_saturated,
+            felt: e.felt_force_nn().is_some(),
         };
         write(out, &datagram);
     }
