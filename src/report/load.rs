@@ -7,12 +7,14 @@
 //! - **recorded** by `nanoforce run`: `estimates.csv` (one row per tracked frame, time
 //!   `frame_time_s`), `stats.json`, `events.log` and, when the run recorded them,
 //!   overlay thumbnails in `thumbnails/`.
+//!
+//! Both CSVs are the one estimate schema, read by [`read_results`]; an `estimates.csv`
+//! from before it had a `frame` column is named by `frame_seq`.
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::ReportError;
 use crate::config::{Config, PixelOrigin};
-use crate::session::csv::Table;
 use crate::session::results::{read_results, ResultRow};
 use crate::session::score::{read_truth, score, Score, TruthRow};
 
@@ -111,7 +113,7 @@ fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
         .enumerate()
         .map(|(k, r)| {
             let t = truth_of(r);
-            let mut row = replayed_row(
+            let mut row = frame_row(
                 r,
                 origin,
                 t.and_then(|t| t.t_s).filter(|_| timed).unwrap_or(k as f64),
@@ -144,7 +146,9 @@ fn pixel_origin_of(config: &Path) -> PixelOrigin {
     Config::load(config).map_or(PixelOrigin::Centre, |c| c.tracker.pixel_origin)
 }
 
-fn replayed_row(r: &ResultRow, origin: PixelOrigin, t: f64) -> FrameRow {
+/// A row of the estimate CSV as the report draws it, its pixels in the conventions' frame
+/// (from the CSV's `tracker.pixel_origin`), at time `t`.
+fn frame_row(r: &ResultRow, origin: PixelOrigin, t: f64) -> FrameRow {
     FrameRow {
         name: r.frame.clone(),
         t,
@@ -164,17 +168,25 @@ fn replayed_row(r: &ResultRow, origin: PixelOrigin, t: f64) -> FrameRow {
 }
 
 fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportError> {
-    let text = std::fs::read_to_string(estimates).map_err(|source| ReportError::Read {
-        path: estimates.to_path_buf(),
-        source,
-    })?;
-    let mut rows = parse_estimates(&text).map_err(|reason| ReportError::Format {
-        path: estimates.to_path_buf(),
-        reason,
-    })?;
+    let results = read_results(estimates)?;
     let origin = pixel_origin_of(&dir.join("config.toml"));
-    for row in &mut rows {
-        row.tip_px = row.tip_px.map(|p| origin.input(p));
+    let mut rows = Vec::with_capacity(results.len());
+    for r in &results {
+        let Some(t) = r.time_s else {
+            return Err(ReportError::Format {
+                path: estimates.to_path_buf(),
+                reason: format!("frame {}: no frame_time_s", r.frame),
+            });
+        };
+        rows.push(FrameRow {
+            name: format!(
+                "frame {}",
+                r.frame_seq.map_or("?".into(), |s| s.to_string())
+            ),
+            true_force_nn: r.true_force_nn,
+            frame_seq: r.frame_seq,
+            ..frame_row(r, origin, t)
+        });
     }
     let stats = std::fs::read_to_string(dir.join("stats.json"))
         .ok()
@@ -193,79 +205,36 @@ fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportErro
     })
 }
 
-/// The daemon's `estimates.csv` (see `daemon::telemetry`).
-pub fn parse_estimates(text: &str) -> Result<Vec<FrameRow>, String> {
-    let table = Table::parse(text)?;
-    let names = [
-        "frame_seq",
-        "frame_time_s",
-        "detected",
-        "angle_deg",
-        "force_nN",
-        "tip_x",
-        "tip_y",
-        "confidence",
-        "processing_ms",
-        "true_force_nN",
-    ];
-    let cols = names.map(|name| table.column(name));
-    let [Some(seq), Some(time), Some(det), ..] = cols else {
-        return Err("no frame_seq, frame_time_s and detected columns".into());
-    };
-    let [_, _, _, angle, force, tx, ty, conf, ms, truth] = cols;
-    let mut rows = Vec::new();
-    for record in &table.rows {
-        let num = |i: Option<usize>| record.number(i);
-        let Some(t) = num(Some(time)) else {
-            return Err(format!(
-                "row {}: frame_time_s is {:?}",
-                record.line,
-                record.cell(Some(time))
-            ));
-        };
-        let frame_seq = record.cell(Some(seq)).parse::<u64>().ok();
-        let detected = record.cell(Some(det)) == "1";
-        rows.push(FrameRow {
-            name: format!("frame {}", frame_seq.map_or("?".into(), |s| s.to_string())),
-            t,
-            detected,
-            angle_deg: num(angle).filter(|_| detected),
-            force_nn: num(force).filter(|_| detected),
-            confidence: num(conf),
-            processing_ms: num(ms),
-            true_force_nn: num(truth),
-            tip_px: num(tx)
-                .zip(num(ty))
-                .map(|(x, y)| [x, y])
-                .filter(|_| detected),
-            frame_seq,
-            ..FrameRow::default()
-        });
-    }
-    Ok(rows)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn estimates_csv_rows() {
-        let text =
+    fn a_recording_from_before_the_frame_column_still_loads() {
+        // estimates.csv as runs wrote it before it shared the replay's schema.
+        let dir = tempfile::tempdir().unwrap();
+        let estimates = dir.path().join("estimates.csv");
+        std::fs::write(
+            &estimates,
             "seq,frame_seq,frame_time_s,published_s,detected,angle_deg,force_nN,tip_x,tip_y,\
-                    confidence,processing_ms,true_force_nN\n\
-                    1,3,0.050000,0.071000,1,-1.5,-420.5,300.5,200.25,0.9100,4.200,-400\n\
-                    2,4,0.066667,0.090000,0,,,,,0.1000,3.900,\n";
-        let rows = parse_estimates(text).unwrap();
+             confidence,processing_ms,true_force_nN\n\
+             1,3,0.050000,0.071000,1,-1.5,-420.5,300.5,200.25,0.9100,4.200,-400\n\
+             2,4,0.066667,0.090000,0,,,,,0.1000,3.900,\n",
+        )
+        .unwrap();
+        let rows = load(dir.path(), None).unwrap().rows;
         assert_eq!(rows.len(), 2);
-        assert_eq!(rows[0].frame_seq, Some(3));
+        assert_eq!((rows[0].frame_seq, rows[0].t), (Some(3), 0.05));
+        assert_eq!(rows[0].name, "frame 3");
         assert_eq!(rows[0].force_nn, Some(-420.5));
         assert_eq!(rows[0].tip_px, Some([300.5, 200.25]));
         assert_eq!(rows[0].true_force_nn, Some(-400.0));
         assert!(!rows[1].detected && rows[1].force_nn.is_none());
         assert_eq!(rows[1].processing_ms, Some(3.9));
-        assert!(parse_estimates("a,b\n").is_err());
-        let bad = parse_estimates("frame_seq,frame_time_s,detected\n1,soon,1\n").unwrap_err();
+        std::fs::write(&estimates, "a,b\n").unwrap();
+        assert!(load(dir.path(), None).is_err());
+        std::fs::write(&estimates, "frame_seq,frame_time_s,detected\n1,soon,1\n").unwrap();
+        let bad = load(dir.path(), None).unwrap_err().to_string();
         assert!(bad.contains("row 2"), "{bad}");
     }
 

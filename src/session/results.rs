@@ -226,6 +226,10 @@ pub struct ResultRow {
     /// The frame's sequence number (absent in older results).
     pub frame_seq: Option<u64>,
     pub processing_ms: Option<f64>,
+    /// The capture time on the recording's clock, seconds (`frame_time_s`).
+    pub time_s: Option<f64>,
+    /// The simulator's true force (a simulated live run's `true_force_nN`).
+    pub true_force_nn: Option<f64>,
 }
 
 /// A results CSV that cannot be read.
@@ -256,8 +260,9 @@ pub fn read_results(path: &Path) -> Result<Vec<ResultRow>, ResultsError> {
 pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
     let table = Table::parse(text)?;
     let col = |name: &str| table.column(name);
-    let (Some(frame), Some(detected)) = (col("frame"), col("detected")) else {
-        return Err("no `frame` and `detected` columns".into());
+    // A run's estimates.csv before it had a `frame` column names frames by `frame_seq`.
+    let (Some(frame), Some(detected)) = (col("frame").or(col("frame_seq")), col("detected")) else {
+        return Err("no `frame` (or `frame_seq`) and `detected` columns".into());
     };
     let names = [
         "angle_deg",
@@ -268,8 +273,10 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
         "px_per_um",
         "magnification",
         "processing_ms",
+        "frame_time_s",
+        "true_force_nN",
     ];
-    let [angle, force, tx, ty, conf, ppu, mag, ms] = names.map(col);
+    let [angle, force, tx, ty, conf, ppu, mag, ms, time, truth] = names.map(col);
     let edge_cols: Vec<[Option<usize>; 4]> = Edge::ALL
         .iter()
         .map(|e| ["x0", "y0", "x1", "y1"].map(|k| col(&format!("{}_{k}", e.name()))))
@@ -283,6 +290,13 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
         if !matches!(flag, "0" | "1" | "true" | "false") {
             return Err(format!(
                 "row {}: detected is {flag:?}, not 1/0",
+                record.line
+            ));
+        }
+        let time_cell = record.cell(time);
+        if !time_cell.is_empty() && num(time).is_none() {
+            return Err(format!(
+                "row {}: frame_time_s is {time_cell:?}, not seconds",
                 record.line
             ));
         }
@@ -305,6 +319,8 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
             miss: record.cell(miss).to_string(),
             frame_seq: record.cell(frame_seq).parse().ok(),
             processing_ms: num(ms),
+            time_s: num(time),
+            true_force_nn: num(truth),
         });
     }
     Ok(rows)
