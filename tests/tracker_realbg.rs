@@ -238,3 +238,109 @@ fn calibration_names_the_edge_without_contrast() {
         "{text}"
     );
 }
+
+#[test]
+#[ignore = "a measurement for docs/tracker.md: cargo test --release --test tracker_realbg -- --ignored --nocapture"]
+fn the_tracker_noise_sets_the_p95() {
+    // The suite's angle p95 against the tracker's own noise: each frame with the probe is
+    // drawn again six times with other seeds (the same conditions: probe, pose,
+    // background crop, contrast, noise level; new noise, shading and jitter) and tracked
+    // from scratch. Per frame, the estimates' spread is the estimator's noise there and
+    // their mean error its bias. The p95 an estimator with that noise and no bias would
+    // reach is the x where the frames' mean P(|N(0, spread)| > x) is 5 % (the median's:
+    // 50 %).
+    let crops = rendered::real_crops();
+    let seed = suite_seed(71);
+    let sessions = scene::real_suite(seed, 12, 50, crops.len());
+    // (noise sigma of the frame, spread, bias), degrees.
+    let mut frames: Vec<(f64, f64, f64)> = Vec::new();
+    for s in &sessions {
+        let cfg = rendered::tracker_config(s);
+        let mut reference = image::GrayImage::new(1, 1);
+        scene::render_over_into(&s.reference, &crops, &mut reference);
+        let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
+            .expect("the reference calibrates");
+        let mut tracker = nanoforce::vision::Tracker::new(&cfg, cal, Some(s.probe().cantilever()));
+        tracker.set_coherence(false);
+        let mut frame = image::GrayImage::new(1, 1);
+        for spec in s.frames.iter().filter(|f| !f.blank) {
+            let mut errors = Vec::new();
+            for draw in 1..=6u64 {
+                let mut again = *spec;
+                again.seed = spec.seed.wrapping_mul(31).wrapping_add(draw);
+                let truth = scene::render_over_into(&again, &crops, &mut frame);
+                if let Some(a) = tracker.track(&frame).angle_deg {
+                    errors.push(a - truth.angle_deg);
+                }
+            }
+            if errors.len() < 3 {
+                continue;
+            }
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+            let var =
+                errors.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / (errors.len() - 1) as f64;
+            frames.push((spec.look.noise_sigma, var.sqrt(), mean));
+        }
+    }
+    // The x at which the frames' mean chance of an error beyond x is `share`.
+    let quantile = |share: f64, bias: bool, of: &dyn Fn(f64) -> bool| -> f64 {
+        let chosen: Vec<_> = frames.iter().filter(|f| of(f.0)).collect();
+        let beyond = |x: f64| {
+            chosen
+                .iter()
+                .map(|&&(_, s, b)| {
+                    let b = if bias { b } else { 0.0 };
+                    let z = std::f64::consts::SQRT_2 * s.max(1e-9);
+                    0.5 * (erfc((x - b) / z) + erfc((x + b) / z))
+                })
+                .sum::<f64>()
+                / chosen.len() as f64
+        };
+        let (mut lo, mut hi) = (0.0, 5.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if beyond(mid) > share {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    };
+    let all = |_: f64| true;
+    let quiet = |n: f64| n <= 30.0;
+    for (name, share) in [("median", 0.5), ("p95", 0.05)] {
+        println!(
+            "seed {seed}: {} frames with the probe, each drawn 6 times; the {name} of an \
+             estimator with the tracker's noise and no bias: {:.4} deg (noise <= 30: \
+             {:.4}); with its bias too: {:.4} deg (noise <= 30: {:.4})",
+            frames.len(),
+            quantile(share, false, &all),
+            quantile(share, false, &quiet),
+            quantile(share, true, &all),
+            quantile(share, true, &quiet),
+        );
+    }
+}
+
+/// The complementary error function (Numerical Recipes' erfcc, |error| < 1.2e-7).
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.265_512_23
+            + t * (1.000_023_68
+                + t * (0.374_091_96
+                    + t * (0.096_784_18
+                        + t * (-0.186_288_06
+                            + t * (0.278_868_07
+                                + t * (-1.135_203_98
+                                    + t * (1.488_515_87
+                                        + t * (-0.822_152_23 + t * 0.170_872_77)))))))))
+            .exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
