@@ -81,7 +81,7 @@ fn bench_sizes(c: &mut Criterion) {
         .to_luma8();
     let cal =
         Calibration::from_reference(&reference, &clicks, &config.tracker).expect("calibrates");
-    let mut tracker = Tracker::new(&config.tracker, cal, Some(config.cantilever));
+    let mut tracker = Tracker::new(&config.tracker, cal, config.cantilever);
     tracker.set_coherence(false);
     let img = image::open(dir.join("frames/frame_00001.png"))
         .expect("frame")

@@ -26,7 +26,7 @@ fn main() -> anyhow::Result<()> {
     let config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml"))?;
     let contact = Contact {
         sample: config.sim.sample.clone(),
-        cantilever: config.cantilever,
+        cantilever: config.cantilever.unwrap(),
         press_direction: config.teleop.press_direction_stage,
     };
     let scene = SemScene::new(

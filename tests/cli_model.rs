@@ -117,6 +117,7 @@ fn config_adds_the_force_in_nanonewtons() {
     let scale_nn = Config::load(config)
         .expect("sample config")
         .cantilever
+        .expect("the sample has [cantilever]")
         .force_scale_nn();
     // Sample `mixed`: EI / L^2 = k L / 3 with k = 0.06 N/m, L = 434.675 um.
     assert!((scale_nn / (0.06 * 434.675e-6 / 3.0 * 1e9) - 1.0).abs() < 1e-14);

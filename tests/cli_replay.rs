@@ -451,3 +451,48 @@ fn frames_differing_only_in_extension_get_distinct_overlays() {
     );
     assert!(!overlays.exists() && !csv.exists(), "nothing written");
 }
+
+#[test]
+fn a_probe_without_a_cantilever_is_tracked_for_its_pose_only() {
+    // The public sample's probe without its [cantilever]: a needle or a gripper jaw as
+    // far as the configuration knows. Replay reports its pose and no force; `run`
+    // refuses it, since it renders a force.
+    let (dir, src, _) = session_copy("mixed", 0);
+    let text = std::fs::read_to_string(dir.path().join("probe.toml")).unwrap();
+    let start = text.find("[cantilever]").unwrap();
+    let end = start + text[start..].find("\n[").unwrap() + 1;
+    let no_force = dir.path().join("needle.toml");
+    std::fs::write(&no_force, format!("{}{}", &text[..start], &text[end..])).unwrap();
+    let csv = dir.path().join("pose.csv");
+    let out = replay(&src.join("frames"), &no_force, &csv, &[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = read_rows(&csv);
+    assert_eq!(rows.len(), 30);
+    let detected: Vec<_> = rows.iter().filter(|r| r["detected"] == "1").collect();
+    assert!(detected.len() >= 25, "{} detected", detected.len());
+    for r in &detected {
+        assert!(r["angle_deg"].parse::<f64>().is_ok() && r["tip_x"].parse::<f64>().is_ok());
+        assert_eq!(
+            (r["force_nN"].as_str(), r["felt"].as_str()),
+            ("", "0"),
+            "{r:?}"
+        );
+    }
+    let run = Command::new(BIN)
+        .args(["run", "--duration-s", "1", "--config"])
+        .arg(&no_force)
+        .arg("--state-dir")
+        .arg(dir.path().join("state"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{err}");
+    assert!(
+        err.contains("no [cantilever] section") && err.contains("can be calibrated and replayed"),
+        "{err}"
+    );
+}

@@ -7,7 +7,7 @@ use nanoforce::config::Config;
 fn shipped_example_probe_config_is_valid() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/probe.example.toml");
     let cfg = Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(cfg.cantilever.length_um, 434.675);
+    assert_eq!(cfg.cantilever.map(|c| c.length_um), Some(434.675));
     assert!(cfg.tracker.calibration.is_some());
 }
 

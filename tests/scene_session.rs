@@ -17,9 +17,12 @@ fn mixed_session_layout_parses_with_config_load() {
     let session = Session::mixed(42, 12, 640, 480);
     let truths = session.write(dir.path(), FrameFormat::Png).expect("write");
     let cfg = Config::load(&dir.path().join("probe.toml")).expect("probe.toml parses");
-    assert!((cfg.cantilever.length_um - session.probe().length_um).abs() < 1e-9);
+    let cantilever = cfg
+        .cantilever
+        .expect("the session's probe.toml has [cantilever]");
+    assert!((cantilever.length_um - session.probe().length_um).abs() < 1e-9);
     let force_scale = session.probe().cantilever().force_scale_nn();
-    assert!((cfg.cantilever.force_scale_nn() / force_scale - 1.0).abs() < 1e-12);
+    assert!((cantilever.force_scale_nn() / force_scale - 1.0).abs() < 1e-12);
     let cal = cfg.tracker.calibration.expect("calibration");
     assert_eq!(cal.reference_image, dir.path().join("reference.png"));
     assert!(cal.reference_image.exists());

@@ -143,12 +143,21 @@ fn forces_follow_the_model_and_the_truth() {
     let est = s.run(false);
     for (t, e) in s.truth.iter().zip(&est) {
         let angle = e.angle_deg.expect("detected");
-        let model = s.config.cantilever.force_nn(angle);
+        let model = s.config.cantilever.unwrap().force_nn(angle);
         assert_eq!(e.force_nn, Some(model.value));
         assert!(!e.force_saturated);
         // The force error is the angle error times the local stiffness.
-        let per_deg = s.config.cantilever.force_nn(t.angle_deg + 0.5).value
-            - s.config.cantilever.force_nn(t.angle_deg - 0.5).value;
+        let per_deg = s
+            .config
+            .cantilever
+            .unwrap()
+            .force_nn(t.angle_deg + 0.5)
+            .value
+            - s.config
+                .cantilever
+                .unwrap()
+                .force_nn(t.angle_deg - 0.5)
+                .value;
         let allowed = per_deg.abs() * 0.12 + 1e-9;
         assert!(
             (model.value - t.force_nn).abs() <= allowed,

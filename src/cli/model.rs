@@ -70,7 +70,13 @@ EXIT STATUS
 pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
     // A bad config fails before any input is read.
     let cantilever = match &args.config {
-        Some(path) => Some(Config::load(path)?.cantilever),
+        Some(path) => {
+            let config = Config::load(path)?;
+            let cantilever = config
+                .cantilever
+                .with_context(|| format!("{}: no [cantilever] section to model", path.display()))?;
+            Some(cantilever)
+        }
         None => None,
     };
     let mut input = Vec::new();

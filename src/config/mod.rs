@@ -36,7 +36,9 @@ pub use crate::vision::{
 pub struct Config {
     /// The file it was read from (used in messages and to resolve relative paths).
     pub path: PathBuf,
-    pub cantilever: Cantilever,
+    /// None: a probe without a force model (a tungsten needle, a gripper jaw), tracked
+    /// for its pose only: its estimates carry no force, and `run` refuses it.
+    pub cantilever: Option<Cantilever>,
     pub tracker: TrackerConfig,
     /// `[teleop]` and `[safety]`: the gains SIGHUP may reload.
     pub teleop: TeleopGains,
@@ -132,14 +134,10 @@ impl Config {
             message: err.to_string().trim_end().to_string(),
         })?;
         let check = Checker { file: path };
-        let cantilever = match raw.cantilever {
-            Some(raw) => check.cantilever(raw)?,
-            None => {
-                return Err(check.inconsistent(
-                    "missing [cantilever] section (length_um and a stiffness)".into(),
-                ))
-            }
-        };
+        let cantilever = raw
+            .cantilever
+            .map(|raw| check.cantilever(raw))
+            .transpose()?;
         let tracker = match raw.tracker {
             Some(raw) => check.tracker(raw)?,
             None => TrackerConfig::default(),
@@ -149,7 +147,9 @@ impl Config {
             raw.safety.unwrap_or_default(),
             &check,
         )?;
-        teleop.cantilever = cantilever;
+        if let Some(cantilever) = cantilever {
+            teleop.cantilever = cantilever;
+        }
         let devices = DevicesConfig::validate(
             raw.frames.unwrap_or_default(),
             raw.daq.unwrap_or_default(),
@@ -394,9 +394,10 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     #[test]
     fn sample_config_parses() {
         let cfg = Config::from_toml_str(SAMPLE, Path::new("/data/s/probe.toml")).unwrap();
-        assert_eq!(cfg.cantilever.length_um, 434.675);
+        let cantilever = cfg.cantilever.unwrap();
+        assert_eq!(cantilever.length_um, 434.675);
         let ei = 0.06 * (434.675e-6f64).powi(3) / 3.0;
-        assert!((cfg.cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
+        assert!((cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
         assert_eq!(cfg.tracker.threshold, Threshold::Otsu);
         let cal = cfg.tracker.calibration.unwrap();
         assert_eq!(cal.reference_image, Path::new("/data/s/reference.png"));
@@ -420,7 +421,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         )
         .unwrap();
         let ei = 169e9 * 50e-6 * (2e-6f64).powi(3) / 12.0;
-        assert!((cfg.cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
+        assert!((cfg.cantilever.unwrap().flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
     }
 
     fn error_of(text: &str) -> String {
@@ -626,9 +627,12 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     }
 
     #[test]
-    fn missing_cantilever_section() {
-        let msg = error_of("[tracker]\nthreshold = 100\n");
-        assert!(msg.contains("missing [cantilever]"), "{msg}");
+    fn a_probe_without_a_cantilever_has_no_force_model() {
+        let cfg = parse("[tracker]\nthreshold = 100\n").unwrap();
+        assert_eq!(cfg.cantilever, None);
+        // A half-given [cantilever] is still an error.
+        let msg = error_of("[cantilever]\nwidth_um = 50\n");
+        assert!(msg.contains("missing cantilever.length_um"), "{msg}");
     }
 
     #[test]

@@ -12,6 +12,7 @@ use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
 use crate::hw::open as hw_open;
 use crate::hw::Clock;
+use crate::model::Cantilever;
 use crate::session::frames::load_gray;
 use crate::sim::frames::SimSem;
 use crate::sim::lab as sim_lab;
@@ -33,6 +34,7 @@ impl Estimator for VisionEstimator {
 /// compiled in is found before any device is touched, and a device opened before a
 /// later one failed is closed again (its outputs at zero).
 pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
+    force_model(config)?;
     let devices = &config.devices;
     hw_open::check_compiled(devices)?;
     // Real frames need the configured calibration: checked before touching a device.
@@ -57,7 +59,7 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
                 None => anyhow::bail!("no tracker for the configured frames"),
             },
             None => {
-                let scene = sim_scene(config);
+                let scene = sim_scene(config)?;
                 let tracker = sim_tracker(config, &scene)?;
                 // Without the simulated stage the simulated probe hangs free.
                 (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
@@ -85,9 +87,27 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
     })
 }
 
-/// The simulated SEM of `config`'s `[sim]` sections.
-fn sim_scene(config: &Config) -> SemScene {
-    sim_lab::sem_scene(&config.sim, config.cantilever, &config.teleop)
+/// The cantilever that turns the tip's bending into a force: a run renders that force,
+/// so a probe without `[cantilever]` is refused with the reason.
+fn force_model(config: &Config) -> anyhow::Result<Cantilever> {
+    config.cantilever.ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: no [cantilever] section: `nanoforce run` renders the probe's force, which \
+             needs the cantilever (length_um and a stiffness, config/probe.example.toml). A \
+             probe without one (a needle, a gripper jaw) can be calibrated and replayed: its \
+             pose, without a force",
+            config.path.display()
+        )
+    })
+}
+
+/// The simulated SEM of `config`'s `[sim]` sections (it bends the configured cantilever).
+fn sim_scene(config: &Config) -> anyhow::Result<SemScene> {
+    Ok(sim_lab::sem_scene(
+        &config.sim,
+        force_model(config)?,
+        &config.teleop,
+    ))
 }
 
 /// The tracker calibrated on the simulated SEM's reference frame and clicks.
@@ -97,7 +117,7 @@ fn sim_tracker(config: &Config, scene: &SemScene) -> anyhow::Result<Tracker> {
     Ok(Tracker::new(
         &config.tracker,
         calibration,
-        Some(config.cantilever),
+        config.cantilever,
     ))
 }
 
@@ -106,7 +126,7 @@ fn sim_tracker(config: &Config, scene: &SemScene) -> anyhow::Result<Tracker> {
 /// recorded session with it tracks its frames as the run did.
 pub fn live_tracker(config: &Config) -> anyhow::Result<Tracker> {
     match config.devices.frames {
-        FramesBackend::Sim => sim_tracker(config, &sim_scene(config)),
+        FramesBackend::Sim => sim_tracker(config, &sim_scene(config)?),
         _ => tracker_from_config(config),
     }
 }
@@ -131,7 +151,7 @@ pub fn tracker_from_config(config: &Config) -> anyhow::Result<Tracker> {
     Ok(Tracker::new(
         &config.tracker,
         calibration,
-        Some(config.cantilever),
+        config.cantilever,
     ))
 }
 

@@ -99,7 +99,7 @@ impl Session {
 
     /// As [`Session::run`], with other `[tracker]` settings (same calibration).
     pub fn run_with(&self, tracker: &TrackerConfig, coherence: bool) -> Vec<Estimate> {
-        let mut tracker = Tracker::new(tracker, self.calibrate(), Some(self.config.cantilever));
+        let mut tracker = Tracker::new(tracker, self.calibrate(), self.config.cantilever);
         tracker.set_coherence(coherence);
         self.truth
             .iter()
