@@ -1,8 +1,10 @@
 //! The validation toolkit every configuration section is checked with: the error a
 //! configuration file gets ([`ConfigError`], naming file, key and value), the accepted
-//! range of a number ([`Range`]), fixed-size TOML lists (`List`) and the `Checker`
-//! that knows which file it checks. It imports nothing of the crate, so each module can
-//! validate its own section without reaching up into `config`.
+//! range of a number ([`Range`]), fixed-size TOML lists (`List`), the `Checker` that
+//! knows which file it checks, and sections whose keys depend on a choice (`tagged`:
+//! `backend = "..."` selects the struct of keys that exist; `NoKeys` for a choice with
+//! none). It imports nothing of the crate, so each module can validate its own section
+//! without reaching up into `config`.
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -266,4 +268,99 @@ impl Checker<'_> {
             ))
         }
     }
+}
+
+/// The keys of a choice that has none (`backend = "sim"`, `output = "none"`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct NoKeys {}
+
+/// Reads the table `name` into `T`, an enum tagged by its key `tag` (`default` when the
+/// table has none): the tag selects the variant, and the variant's struct the keys that
+/// exist. Errors name the key: `frames.device is not a key of frames.backend = "pipe"
+/// (its keys: path, format, width, height, timeout_ms)`.
+pub(crate) fn tagged<T: serde::de::DeserializeOwned>(
+    check: &Checker,
+    name: &str,
+    tag: &str,
+    default: Option<&str>,
+    mut table: toml::Table,
+) -> Result<T, ConfigError> {
+    if let (false, Some(default)) = (table.contains_key(tag), default) {
+        table.insert(tag.into(), default.into());
+    }
+    let read = |table: toml::Table| -> Result<T, String> {
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| e.message().to_string())
+    };
+    let message = match read(table.clone()) {
+        Ok(raw) => return Ok(raw),
+        Err(message) => message,
+    };
+    // serde's words, with the key they are about.
+    let chosen = table
+        .get(tag)
+        .map(|v| format!("{name}.{tag} = {v}"))
+        .unwrap_or_default();
+    let listed = |text: &str| {
+        let list = text
+            .trim_start_matches(", expected ")
+            .trim_start_matches("one of ");
+        list.replace('`', "")
+    };
+    let explained = if let Some((key, rest)) = message
+        .strip_prefix("unknown field `")
+        .and_then(|m| m.split_once('`'))
+    {
+        if rest.starts_with(", there are no fields") {
+            format!("{name}.{key} is not a key of {chosen}, which has none")
+        } else {
+            format!(
+                "{name}.{key} is not a key of {chosen} (its keys: {})",
+                listed(rest)
+            )
+        }
+    } else if let Some((_, rest)) = message
+        .strip_prefix("unknown variant `")
+        .and_then(|m| m.split_once('`'))
+    {
+        format!("{chosen} is not one of: {}", listed(rest))
+    } else if message == format!("missing field `{tag}`") {
+        // The values there are: what an empty one is told.
+        table.insert(tag.into(), "".into());
+        let choices = read(table)
+            .err()
+            .and_then(|m| m.split_once('`').map(|(_, r)| r.to_string()))
+            .and_then(|r| r.split_once('`').map(|(_, r)| listed(r)))
+            .unwrap_or_default();
+        format!("missing {name}.{tag} (one of: {choices})")
+    } else {
+        format!("[{name}]: {message}")
+    };
+    Err(check.inconsistent(explained))
+}
+
+/// A required key of a backend.
+pub(crate) fn required<T>(
+    check: &Checker,
+    key: &str,
+    backend: &str,
+    value: Option<T>,
+) -> Result<T, ConfigError> {
+    value
+        .ok_or_else(|| check.inconsistent(format!("missing {key} (needed by backend {backend:?})")))
+}
+
+/// A whole number in `lo..=hi` (`unit` as the message prints it, empty for a count).
+pub(crate) fn in_range(
+    check: &Checker,
+    key: &str,
+    value: i64,
+    (lo, hi): (i64, i64),
+    unit: &'static str,
+) -> Result<u32, ConfigError> {
+    // In range, so it fits (every `hi` in use is below 2^32).
+    let range = Range::new(lo as f64, hi as f64, unit);
+    check.whole(key, value, range).map(|v| v as u32)
 }

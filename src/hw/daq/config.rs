@@ -11,8 +11,8 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
+use crate::checks::{in_range, required, tagged, NoKeys};
 use crate::checks::{Checker, ConfigError, List, Range};
-use crate::hw::config::{in_range, required, tagged, DaqBackend, NoKeys};
 
 // The accepted ranges, documented with the same words in config/lab.example.toml.
 /// DAQ analog outputs span at most +-10 V (a few boards +-20 V).
@@ -24,6 +24,13 @@ const VOLTS_PER_UM_S: Range = Range::new(-10.0, 10.0, "V per um/s").except_zero(
 const PULSES_PER_UM: Range = Range::new(0.01, 10_000.0, "pulses/um");
 /// An NI E-series counter divides a 20 MHz timebase: 5 MHz is the fastest usable train.
 const MAX_RATE_HZ: Range = Range::new(1.0, 5e6, "Hz");
+
+/// What drives the S100's rate inputs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DaqBackend {
+    Sim,
+    Comedi(Box<ComediConfig>),
+}
 
 /// `[daq]` as written: `backend` selects the keys that exist.
 #[derive(Debug, Deserialize)]
@@ -248,7 +255,6 @@ impl RawAxis {
 #[cfg(test)]
 mod tests {
     use crate::config::testing::{error_of, parse};
-    use crate::hw::config::DaqBackend;
     use crate::hw::daq::config::*;
 
     const AXES: &str = "[daq.x]\noutput = \"analog\"\nsubdevice = 1\nchannel = 0\n\

@@ -10,7 +10,15 @@ use crate::checks::{Checker, ConfigError, Range};
 
 /// The frame rate asked of the driver: a slow SEM scan (10 s a frame) to a fast camera.
 const RATE_HZ: Range = Range::new(0.1, 1000.0, "Hz");
-use crate::hw::config::{in_range, FramesBackend, NoKeys};
+use crate::checks::{in_range, NoKeys};
+
+/// Where frames come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FramesBackend {
+    Sim,
+    V4l2(V4l2Config),
+    Pipe(PipeConfig),
+}
 
 /// `[frames]` as written: `backend` selects the keys that exist.
 #[derive(Debug, Deserialize)]
@@ -217,7 +225,6 @@ impl RawPipe {
 #[cfg(test)]
 mod tests {
     use crate::config::testing::{error_of, parse};
-    use crate::hw::config::FramesBackend;
     use crate::hw::frames::config::*;
 
     #[test]

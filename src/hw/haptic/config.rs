@@ -13,7 +13,15 @@ use crate::checks::{Checker, ConfigError, List, Range};
 const TRAVEL_MM: Range = Range::new(1.0, 1000.0, "mm");
 /// A haptic device's force: the PHANToM Touch peaks at 3.3 N, the Premium 1.5 at 8.5 N.
 const FULL_SCALE_N: Range = Range::new(0.01, 10.0, "N");
-use crate::hw::config::{in_range, required, HapticBackend, NoKeys};
+use crate::checks::{in_range, required, NoKeys};
+
+/// The operator's device.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HapticBackend {
+    Sim,
+    OpenHaptics(OpenHapticsConfig),
+    Hid(HidConfig),
+}
 
 /// `[haptic]` as written: `backend` selects the keys that exist.
 #[derive(Debug, Deserialize)]
@@ -243,7 +251,6 @@ impl RawHidForce {
 #[cfg(test)]
 mod tests {
     use crate::config::testing::{error_of, parse};
-    use crate::hw::config::HapticBackend;
     use crate::hw::haptic::config::*;
 
     const JOYSTICK: &str = "[haptic]\nbackend = \"hid\"\nvendor_id = 0x046d\nproduct_id = 0xc215\n\
