@@ -19,14 +19,14 @@
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
 use image::GrayImage;
 
-use super::telemetry::{RecordingState, RecordingStatus};
+use super::recording::{RecordingState, RecordingStatus};
 use crate::hw::frames::pipe::{FrameHeader, HEADER_LEN};
 use crate::hw::frames::FrameMeta;
 use crate::hw::Clock;
@@ -38,20 +38,6 @@ pub const QUEUE_FRAMES: usize = 16;
 /// The part of `recordings_max_mb` a session's frames may take; the rest is left for
 /// its telemetry.
 pub const FRAMES_SHARE: f64 = 0.9;
-
-/// Counters shared by the tap, the writer, the supervisor and the monitor (they live in
-/// the session's [`RecordingStatus`]).
-#[derive(Debug, Default)]
-pub struct FrameRecordShared {
-    /// Frames written to `frames.nfrm`.
-    pub recorded: AtomicU64,
-    /// Frames the tracker offered that were not recorded (the writer was behind, or the
-    /// frames had stopped).
-    pub dropped: AtomicU64,
-    pub bytes: AtomicU64,
-    /// The frames reached their share of the budget (or failed to write) and stopped.
-    pub stopped: AtomicBool,
-}
 
 /// One queued frame: its header and pixels (the buffer goes back to the pool).
 struct Slot {

@@ -33,6 +33,7 @@ pub mod lab;
 pub mod monitor;
 pub mod notify;
 pub mod pipeline;
+pub mod recording;
 pub mod rt;
 pub mod snapshot;
 pub mod stats;

@@ -16,6 +16,7 @@ use super::inject::{PanicInjection, PanickingEstimator, PanickingFrames, Panicki
 use super::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
 use super::notify::Notifier;
 use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport, TrackerSide};
+use super::recording::RecordingStatus;
 use super::snapshot::snapshot_channel;
 use super::stats::{
     ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RecordingStats, RunStats,
@@ -23,7 +24,7 @@ use super::stats::{
 };
 use super::stream::{self, StreamConfig, StreamHandle, StreamShared};
 use super::supervisor_health::Health;
-use super::telemetry::{self, Budget, Recorder, RecordingStatus};
+use super::telemetry::{self, Budget, Recorder};
 use crate::config::PixelOrigin;
 use crate::control::Published;
 use crate::control::{SafetyState, TeleopGains};

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use super::haptic_loop::LoopShared;
 use super::notify::Notifier;
 use super::pipeline::PipelineShared;
-use super::telemetry::{RecordingState, RecordingStatus};
+use super::recording::{RecordingState, RecordingStatus};
 use crate::control::SafetyState;
 
 /// A frame source silent for longer than this makes the pipeline unhealthy.

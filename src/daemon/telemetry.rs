@@ -17,15 +17,16 @@
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use super::frame_record::{FrameRecordShared, FRAMES_FILE};
+use super::frame_record::FRAMES_FILE;
 use super::haptic_loop::TickRecord;
 use super::inject::PanicInjection;
 use super::pipeline::EstimateRecord;
+use super::recording::RecordingStatus;
 use crate::config::PixelOrigin;
 use crate::session::live::{SessionInfo, SESSION_FILE};
 use crate::session::metadata::SemMetadata;
@@ -77,81 +78,6 @@ fn utc_stamp(secs: u64) -> String {
         rem / 60 % 60,
         rem % 60
     )
-}
-
-/// Whether the session is being recorded, shared by the writer thread (which sets it),
-/// the supervisor (status line, stats) and the monitor page.
-#[derive(Debug, Default)]
-pub struct RecordingStatus {
-    state: AtomicU8,
-    error: Mutex<Option<String>>,
-    /// The recorded frames (`frames.nfrm`).
-    pub frames: FrameRecordShared,
-}
-
-/// What [`RecordingStatus`] says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RecordingState {
-    /// This run records nothing (`--no-record`).
-    Off,
-    Recording,
-    /// Recording stopped during the run (a full disk, a write error, the budget); the
-    /// loops go on.
-    Stopped,
-}
-
-impl RecordingState {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            RecordingState::Off => "off",
-            RecordingState::Recording => "recording",
-            RecordingState::Stopped => "stopped",
-        }
-    }
-}
-
-impl RecordingStatus {
-    pub fn recording() -> Self {
-        let status = RecordingStatus::default();
-        status.state.store(1, Ordering::Relaxed);
-        status
-    }
-
-    pub fn state(&self) -> RecordingState {
-        match self.state.load(Ordering::Relaxed) {
-            1 => RecordingState::Recording,
-            2 => RecordingState::Stopped,
-            _ => RecordingState::Off,
-        }
-    }
-
-    /// Why recording stopped, if it did.
-    pub fn error(&self) -> Option<String> {
-        self.error.lock().ok().and_then(|e| e.clone())
-    }
-
-    /// Recording stops for `reason` (the first reason is kept); logged once, as a warning.
-    pub fn stop(&self, reason: String) {
-        if self.state.swap(2, Ordering::Relaxed) == 2 {
-            return;
-        }
-        tracing::warn!("recording stopped: {reason}; control goes on");
-        if let Ok(mut e) = self.error.lock() {
-            *e = Some(reason);
-        }
-    }
-
-    /// One phrase for status lines: "recording", "recording off", "recording stopped: ...".
-    pub fn describe(&self) -> String {
-        match self.state() {
-            RecordingState::Off => "recording off".into(),
-            RecordingState::Recording => "recording".into(),
-            RecordingState::Stopped => format!(
-                "recording stopped: {}",
-                self.error().unwrap_or_else(|| "unknown error".into())
-            ),
-        }
-    }
 }
 
 /// The recordings' size limit (`[daemon] recordings_max_mb`).

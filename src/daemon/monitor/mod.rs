@@ -27,9 +27,9 @@ use self::state::Producer;
 use crate::daemon::haptic_loop::LoopShared;
 use crate::daemon::inject::PanicInjection;
 use crate::daemon::pipeline::PipelineShared;
+use crate::daemon::recording::RecordingStatus;
 use crate::daemon::snapshot::SnapshotReader;
 use crate::daemon::stream::StreamShared;
-use crate::daemon::telemetry::RecordingStatus;
 
 pub use crate::config::MonitorConfig;
 
