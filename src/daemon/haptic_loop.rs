@@ -16,6 +16,7 @@ use nalgebra::Vector3;
 use super::rt;
 use super::stats::Histogram;
 use super::stream::HapticTap;
+use super::tick_record::TickRecord;
 pub use crate::config::LoopOptions;
 use crate::control::Published;
 use crate::control::{
@@ -25,22 +26,6 @@ use crate::hw::clock::monotonic_ns;
 use crate::hw::daq::RateOutput;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
-
-/// One telemetry row of the loop.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TickRecord {
-    pub t_s: f64,
-    pub period_us: f64,
-    pub position_mm: [f64; 3],
-    pub force_n: [f64; 3],
-    pub velocity_um_s: [f64; 3],
-    pub rendered_force_nn: f64,
-    pub state: SafetyState,
-    pub press_blocked: bool,
-    /// Estimates the plausibility gate held, and rendered attenuated, so far.
-    pub gate_held: u64,
-    pub gate_attenuated: u64,
-}
 
 /// What the loop shares with the supervisor: counters to read, a flag to stop it.
 #[derive(Debug, Default)]

@@ -41,6 +41,7 @@ pub mod stream;
 mod supervisor;
 mod supervisor_health;
 pub mod telemetry;
+pub mod tick_record;
 
 pub use haptic_loop::LoopOptions;
 pub use pipeline::Estimator;

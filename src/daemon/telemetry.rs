@@ -23,10 +23,10 @@ use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use super::frame_record::FRAMES_FILE;
-use super::haptic_loop::TickRecord;
 use super::inject::PanicInjection;
 use super::pipeline::EstimateRecord;
 use super::recording::RecordingStatus;
+use super::tick_record::TickRecord;
 use crate::config::PixelOrigin;
 use crate::session::live::{SessionInfo, SESSION_FILE};
 use crate::session::metadata::SemMetadata;

@@ -7,7 +7,7 @@ use serde::{Serialize, Serializer};
 
 use crate::config::PixelOrigin;
 use crate::control::Published;
-use crate::daemon::haptic_loop::TickRecord;
+use crate::daemon::tick_record::TickRecord;
 use crate::session::utc::{civil_from_days, UtcAnchor};
 
 /// A Unix time printed as RFC 3339 UTC with microseconds: `2026-12-03T00:01:10.123456Z`.

@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use self::datagram::Format;
-use super::haptic_loop::TickRecord;
+use super::tick_record::TickRecord;
 use crate::config::PixelOrigin;
 pub use crate::config::StreamConfig;
 use crate::control::Published;
