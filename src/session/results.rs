@@ -106,10 +106,7 @@ pub fn write_row(
     sem: &SemMetadata,
     extras: &RowExtras,
 ) -> io::Result<()> {
-    let fixed = |v: Option<f64>, digits: usize| match v.filter(|v| v.is_finite() && e.detected) {
-        Some(v) => format!("{v:.digits$}"),
-        None => String::new(),
-    };
+    let fixed = |v: Option<f64>, digits: usize| cell(e.shown(v), digits);
     let support = |edge: Edge| e.edges[edge.index()].map_or(0, |f| f.support);
     write!(
         out,
@@ -122,7 +119,7 @@ pub fn write_row(
         fixed(e.apex_px.map(|a| a[1]), 3),
         e.confidence,
         fixed(e.angle_sigma_deg, 6),
-        e.scale.map_or(String::new(), |s| format!("{s:.5}")),
+        cell(e.scale, 5),
         u8::from(e.force_saturated),
         support(Edge::Red),
         support(Edge::Blue),
@@ -139,22 +136,20 @@ pub fn write_row(
 
 /// `frame_time_s,processing_ms,seq,published_s,true_force_nN`, each empty when unknown.
 fn write_stamps(out: &mut impl Write, frame: &FrameLabel, x: &RowExtras) -> io::Result<()> {
-    let opt = |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
     write!(
         out,
         ",{},{},{},{},{}",
-        opt(frame.time_s, 6),
-        opt(x.processing_ms, 3),
+        cell(frame.time_s, 6),
+        cell(x.processing_ms, 3),
         x.published
             .map_or(String::new(), |(seq, _)| seq.to_string()),
-        opt(x.published.map(|(_, t)| t), 6),
+        cell(x.published.map(|(_, t)| t), 6),
         x.true_force_nn.map_or(String::new(), |f| format!("{f}")),
     )
 }
 
 /// `px_per_um,magnification,tip_x_um,tip_y_um`.
 fn scale_columns(e: &Estimate, sem: &SemMetadata) -> String {
-    let opt = |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
     let px_per_um = sem.px_per_um();
     let apex_um = match (e.detected.then_some(e.apex_px).flatten(), px_per_um) {
         (Some(a), Some(k)) => [Some(a[0] / k), Some(a[1] / k)],
@@ -162,11 +157,16 @@ fn scale_columns(e: &Estimate, sem: &SemMetadata) -> String {
     };
     format!(
         "{},{},{},{}",
-        opt(px_per_um, 5),
-        opt(sem.magnification, 1),
-        opt(apex_um[0], 4),
-        opt(apex_um[1], 4)
+        cell(px_per_um, 5),
+        cell(sem.magnification, 1),
+        cell(apex_um[0], 4),
+        cell(apex_um[1], 4)
     )
+}
+
+/// A number to `digits` places, or an empty cell.
+fn cell(value: Option<f64>, digits: usize) -> String {
+    value.map_or(String::new(), |v| format!("{v:.digits$}"))
 }
 
 /// The 12 edge columns: start and end of red, blue, green (empty when not found).

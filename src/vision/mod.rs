@@ -202,6 +202,12 @@ impl Estimate {
             .filter(|f| self.detected && !self.force_saturated && f.is_finite())
     }
 
+    /// One of this estimate's values as every output shows it (the estimate CSV, the
+    /// stream, the monitor): only for a detection, and only when finite.
+    pub fn shown(&self, value: Option<f64>) -> Option<f64> {
+        value.filter(|v| self.detected && v.is_finite())
+    }
+
     /// The estimate with its pixels (apex, edge ends) counted from `origin`, for the
     /// numbers nanoforce writes out; drawing and tracking keep the pixel centre's.
     pub fn with_pixel_origin(mut self, origin: PixelOrigin) -> Estimate {

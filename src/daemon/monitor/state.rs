@@ -101,14 +101,13 @@ impl Producer {
         let snapshot = self.reader.frames.output_buffer_mut();
         let p = &snapshot.estimate;
         let estimate = &p.estimate;
-        let shown = |v: Option<f64>| v.filter(|_| estimate.detected);
         self.frame = Some(json!({
             "seq": p.frame_sequence,
             "t": p.frame_time_s,
             "detected": estimate.detected,
             "felt": estimate.felt_force_nn().is_some(),
-            "angle_deg": shown(estimate.angle_deg),
-            "force_nn": shown(estimate.force_nn),
+            "angle_deg": estimate.shown(estimate.angle_deg),
+            "force_nn": estimate.shown(estimate.force_nn),
             "confidence": estimate.confidence,
             "width": snapshot.image.width(),
             "height": snapshot.image.height(),

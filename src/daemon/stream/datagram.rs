@@ -95,13 +95,9 @@ pub struct Format {
 impl Format {
     /// Writes the datagram of a published estimate into `out` (cleared first).
     pub fn estimate(&self, out: &mut Vec<u8>, p: &Published) {
-        // As the estimate CSV shows it: values of a detection only.
         let e = &p.estimate;
-        let shown = |v: Option<f64>| v.filter(|v| e.detected && v.is_finite());
-        let tip = e
-            .apex_px
-            .filter(|_| e.detected)
-            .map_or([None; 2], |a| self.pixel_origin.output(a).map(known));
+        let apex = e.apex_px.map(|a| self.pixel_origin.output(a));
+        let tip = [0, 1].map(|i| e.shown(apex.map(|a| a[i])));
         let unix_s = self.anchor.unix_ns(p.frame_time_s) as f64 * 1e-9;
         let datagram = EstimateDatagram {
             kind: "estimate",
@@ -111,12 +107,12 @@ impl Format {
             unix_s,
             t_s: p.frame_time_s,
             detected: e.detected,
-            angle_deg: shown(e.angle_deg),
-            force_nn: shown(e.force_nn),
+            angle_deg: e.shown(e.angle_deg),
+            force_nn: e.shown(e.force_nn),
             tip_x: tip[0],
             tip_y: tip[1],
             confidence: e.confidence,
-            angle_sigma_deg: shown(e.angle_sigma_deg),
+            angle_sigma_deg: e.shown(e.angle_sigma_deg),
             force_saturated: e.force_saturated,
             felt: e.felt_force_nn().is_some(),
         };
