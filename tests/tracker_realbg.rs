@@ -255,13 +255,7 @@ fn the_tracker_noise_sets_the_p95() {
     // (noise sigma of the frame, spread, bias), degrees.
     let mut frames: Vec<(f64, f64, f64)> = Vec::new();
     for s in &sessions {
-        let cfg = rendered::tracker_config(s);
-        let mut reference = image::GrayImage::new(1, 1);
-        scene::render_over_into(&s.reference, &crops, &mut reference);
-        let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
-            .expect("the reference calibrates");
-        let mut tracker = nanoforce::vision::Tracker::new(&cfg, cal, Some(s.probe().cantilever()));
-        tracker.set_coherence(false);
+        let mut tracker = rendered::tracker_over(s, &crops);
         let mut frame = image::GrayImage::new(1, 1);
         for spec in s.frames.iter().filter(|f| !f.blank) {
             let mut errors = Vec::new();

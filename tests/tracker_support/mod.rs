@@ -370,21 +370,30 @@ pub mod rendered {
             .collect()
     }
 
+    /// A tracker without coherence (each frame from scratch), calibrated on `session`'s
+    /// reference rendered over `crops`.
+    pub fn tracker_over(session: &Session, crops: &[GrayImage]) -> Tracker {
+        let cfg = tracker_config(session);
+        let mut reference = GrayImage::new(1, 1);
+        render_over_into(&session.reference, crops, &mut reference);
+        let cal = Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
+            .unwrap_or_else(|err| {
+                panic!(
+                    "session {}: reference: {err}",
+                    session.reference.look.style_name
+                )
+            });
+        let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+        tracker.set_coherence(false);
+        tracker
+    }
+
     /// Renders every frame of each session over `crops` and tracks it with a tracker
     /// calibrated on the session's own reference (rendered over the same crops).
     pub fn run_all_over(sessions: &[Session], crops: &[GrayImage]) -> (Vec<Truth>, Vec<Estimate>) {
         let (mut truths, mut estimates) = (Vec::new(), Vec::new());
         for s in sessions {
-            let cfg = tracker_config(s);
-            let mut reference = GrayImage::new(1, 1);
-            render_over_into(&s.reference, crops, &mut reference);
-            let cal =
-                Calibration::from_reference(&reference, cfg.calibration.as_ref().unwrap(), &cfg)
-                    .unwrap_or_else(|err| {
-                        panic!("session {}: reference: {err}", s.reference.look.style_name)
-                    });
-            let mut tracker = Tracker::new(&cfg, cal, Some(s.probe().cantilever()));
-            tracker.set_coherence(false);
+            let mut tracker = tracker_over(s, crops);
             let mut frame = GrayImage::new(1, 1);
             for (k, spec) in s.frames.iter().enumerate() {
                 let t = render_over_into(spec, crops, &mut frame);

@@ -303,42 +303,41 @@ mod tests {
     fn axis_errors_name_key_and_value() {
         let base = "[daq]\nbackend = \"comedi\"\n";
         assert!(error_of(base).contains("missing [daq.x]"));
-        let msg = error_of(&format!("{base}{}", AXES.replace("0.1", "0")));
-        assert_eq!(
-            msg,
-            "lab.toml: daq.x.volts_per_um_s = 0 is out of range: \
-             accepted -10 to 10 V per um/s, not 0"
-        );
-        let msg = error_of(&format!("{base}{}", AXES.replace("\"none\"", "\"pwm\"")));
-        assert_eq!(
-            msg,
-            "lab.toml: daq.z.output = \"pwm\" is not one of: analog, step_dir, none"
-        );
-        let msg = error_of(&format!(
-            "{base}{}",
-            AXES.replace("output = \"none\"\n", "")
-        ));
-        assert_eq!(
-            msg,
-            "lab.toml: missing daq.z.output (one of: analog, step_dir, none)"
-        );
-        let msg = error_of(&format!(
-            "{base}{}",
-            AXES.replace("channel = 0", "range = 1\nchannel = 300")
-        ));
-        assert_eq!(
-            msg,
-            "lab.toml: daq.x.channel = 300 is out of range: accepted 0 to 255"
-        );
-        let msg = error_of(&format!(
-            "{base}{}",
-            AXES.replace("pulses_per_um = 50", "zero_v = 1.0")
-        ));
-        assert_eq!(
-            msg,
-            "lab.toml: daq.y.zero_v is not a key of daq.y.output = \"step_dir\" (its keys: \
-             device, counter_subdevice, dio_subdevice, direction_channel, pulses_per_um, \
-             max_rate_hz, invert_direction)"
-        );
+        // (what of AXES is replaced, by what, the message)
+        for (from, to, message) in [
+            (
+                "0.1",
+                "0",
+                "lab.toml: daq.x.volts_per_um_s = 0 is out of range: \
+                 accepted -10 to 10 V per um/s, not 0",
+            ),
+            (
+                "\"none\"",
+                "\"pwm\"",
+                "lab.toml: daq.z.output = \"pwm\" is not one of: analog, step_dir, none",
+            ),
+            (
+                "output = \"none\"\n",
+                "",
+                "lab.toml: missing daq.z.output (one of: analog, step_dir, none)",
+            ),
+            (
+                "channel = 0",
+                "range = 1\nchannel = 300",
+                "lab.toml: daq.x.channel = 300 is out of range: accepted 0 to 255",
+            ),
+            (
+                "pulses_per_um = 50",
+                "zero_v = 1.0",
+                "lab.toml: daq.y.zero_v is not a key of daq.y.output = \"step_dir\" (its keys: \
+                 device, counter_subdevice, dio_subdevice, direction_channel, pulses_per_um, \
+                 max_rate_hz, invert_direction)",
+            ),
+        ] {
+            assert_eq!(
+                error_of(&format!("{base}{}", AXES.replace(from, to))),
+                message
+            );
+        }
     }
 }
