@@ -230,6 +230,9 @@ dispatch! {
     ) => bin_body
 }
 
+/// Largest binning factor whose column sums fit the `u16` columns (255 x 257 < 2^16).
+const MAX_COLUMN_FACTOR: usize = 257;
+
 /// Mean of each `factor x factor` block of `frame` into `out` (row-major, `width` wide).
 /// Also fills `hist` with the histogram of the binned grey levels (for Otsu).
 #[inline(always)]
@@ -263,6 +266,20 @@ fn bin_body(
             }
             for (s, c) in sums.iter_mut().zip(columns.chunks_exact(2)) {
                 *s = (c[0] + c[1]) as u32;
+            }
+        } else if factor <= MAX_COLUMN_FACTOR && width * factor <= columns.len() {
+            // Columns first (the rows added element-wise vectorise), then runs of
+            // `factor` columns.
+            let columns = &mut columns[..width * factor];
+            columns.iter_mut().for_each(|c| *c = 0);
+            for dy in 0..factor {
+                let row = &raw[(by * factor + dy) * stride..][..width * factor];
+                for (c, &v) in columns.iter_mut().zip(row) {
+                    *c += v as u16;
+                }
+            }
+            for (s, c) in sums.iter_mut().zip(columns.chunks_exact(factor)) {
+                *s = c.iter().map(|&v| v as u32).sum::<u32>();
             }
         } else {
             sums.iter_mut().for_each(|s| *s = 0);
