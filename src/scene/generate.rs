@@ -3,10 +3,10 @@
 //! releasing, magnification jumps, the probe now and then out of view), and the test
 //! suite that spans every condition of docs/renderer.md for the tracker's accuracy tests.
 
-use super::geometry::Entry;
+use super::geometry::{probe_outline, px_per_um, Entry, Pose};
 use super::rng::{sub_seed, Rng};
 use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
-use super::spec::{FrameSpec, Look, Style};
+use super::spec::{FrameSpec, Look, Others, Placement, Style};
 use crate::vision::{Threshold, DEFAULT_WINDOW_DEG};
 
 /// Share of each style in mixed sets (as in the public `mixed` sample).
@@ -151,6 +151,181 @@ impl Session {
             click_seed: sub_seed(seed, 3),
         }
     }
+}
+
+/// Where each probe of a view of several sits: its entry side and the ranges of its
+/// apex (fractions of width and height). Two probes face each other across the frame
+/// (two cantilevers squeezing an object); three or four add a row: each probe's body
+/// stays within its own quarter (the pyramid hangs above its apex's row), so no probe
+/// covers another.
+const SLOTS: [(Entry, [f64; 2], [f64; 2]); 4] = [
+    (Entry::Left, [0.25, 0.32], [0.35, 0.42]),
+    (Entry::Right, [0.68, 0.75], [0.35, 0.42]),
+    (Entry::Left, [0.25, 0.32], [0.78, 0.85]),
+    (Entry::Right, [0.68, 0.75], [0.78, 0.85]),
+];
+/// The vertical range of two probes' apexes (one row, mid-frame).
+const PAIR_ROW: [f64; 2] = [0.4, 0.6];
+/// Magnifications of a view of several probes: low enough that each body stays in
+/// its quarter.
+const SEVERAL_MAGNIFICATIONS: [f64; 3] = [1000.0, 1500.0, 2000.0];
+/// Base tilts and tip angles of a view of several probes, degrees: each beam stays in
+/// its row.
+const SEVERAL_BASE_DEG: f64 = 10.0;
+const SEVERAL_ANGLE_DEG: f64 = 15.0;
+
+impl Session {
+    /// `n` frames of `count` probes (2 to 4, each its own random geometry) in one view,
+    /// in random order: each probe at its own angle, placement and out of view at
+    /// random ([`BLANK_FRACTION`]), every style mixed. Probe 1 is the frame's own, the
+    /// others its [`FrameSpec::others`]; the files are named as
+    /// [`Session::probe_names`].
+    pub fn several(seed: u64, count: usize, n: usize, width: u32, height: u32) -> Session {
+        assert!((2..=SLOTS.len()).contains(&count), "2 to 4 probes");
+        let mut rng = Rng::new(sub_seed(seed, 5));
+        let setups: Vec<(Setup, [f64; 2], [f64; 2])> = SLOTS[..count]
+            .iter()
+            .enumerate()
+            .map(|(k, &(entry, xs, ys))| {
+                let mut setup = Setup::random(sub_seed(seed, 20 + k as u64), width, height);
+                setup.entry = entry;
+                setup.base_deg = rng.uniform(-SEVERAL_BASE_DEG, SEVERAL_BASE_DEG);
+                (setup, xs, if count == 2 { PAIR_ROW } else { ys })
+            })
+            .collect();
+        let place = |k: usize, angle: f64, rng: &mut Rng| {
+            let (setup, xs, ys) = &setups[k];
+            Placement {
+                probe: setup.probe,
+                entry: setup.entry,
+                base_deg: setup.base_deg,
+                angle_deg: angle,
+                apex_px: [
+                    rng.uniform(xs[0], xs[1]) * f64::from(width),
+                    rng.uniform(ys[0], ys[1]) * f64::from(height),
+                ],
+                blank: rng.chance(BLANK_FRACTION),
+            }
+        };
+        let with = |mut spec: FrameSpec, places: &[Placement]| {
+            let own = places[0];
+            spec.probe = own.probe;
+            spec.entry = own.entry;
+            spec.base_deg = own.base_deg;
+            spec.angle_deg = own.angle_deg;
+            spec.apex_px = own.apex_px;
+            spec.blank = own.blank;
+            spec.others = Others::of(&places[1..]);
+            spec
+        };
+        let mut outline = Vec::new();
+        let frames = (0..n)
+            .map(|_| {
+                let style = pick_style(&mut rng);
+                let mag = SEVERAL_MAGNIFICATIONS[rng.int(0, 2) as usize];
+                let mut places: Vec<Placement> = Vec::with_capacity(count);
+                for k in 0..count {
+                    // Drawn again until its body keeps clear of the others' (a few
+                    // tries; the last is out of view).
+                    let mut tries = 0;
+                    let placed = loop {
+                        let angle = rng.uniform(-SEVERAL_ANGLE_DEG, SEVERAL_ANGLE_DEG);
+                        let p = place(k, angle, &mut rng);
+                        let b = bounds(&p, mag, width, height, &mut outline);
+                        let clear = places.iter().all(|q| {
+                            !bounds(q, mag, width, height, &mut outline).meets(&b, SEVERAL_GAP_PX)
+                        });
+                        tries += 1;
+                        if clear || tries == SEVERAL_TRIES {
+                            break Placement {
+                                blank: p.blank || !clear,
+                                ..p
+                            };
+                        }
+                    };
+                    places.push(placed);
+                }
+                let mut spec =
+                    random_frame(&setups[0].0, style, mag, places[0].angle_deg, &mut rng);
+                if count > 2 {
+                    // The sample's edge lies below the first row: the second row's
+                    // probes would sit on it.
+                    spec.look.substrate = None;
+                }
+                with(spec, &places)
+            })
+            .collect();
+        let places: Vec<Placement> = (0..count)
+            .map(|k| Placement {
+                blank: false,
+                ..place(k, 0.0, &mut rng)
+            })
+            .collect();
+        let mut reference = with(setups[0].0.reference(seed), &places);
+        reference.magnification = SEVERAL_MAGNIFICATIONS[1];
+        // A person calibrates on a frame where no particle sits on any tip.
+        reference.look.particles = 0;
+        Session {
+            reference,
+            frames,
+            times_s: (0..n).map(|k| k as f64 / FRAME_RATE_HZ).collect(),
+            threshold: Threshold::Otsu,
+            window_deg: DEFAULT_WINDOW_DEG,
+            click_seed: sub_seed(seed, 3),
+        }
+    }
+}
+
+/// The least gap between two probes' bodies in one view, pixels.
+const SEVERAL_GAP_PX: f64 = 12.0;
+/// Placements drawn for one probe before it is left out of view.
+const SEVERAL_TRIES: usize = 20;
+
+/// The part of the frame a placed probe's body covers (its outline's bounding box
+/// within the frame; empty for a probe out of view).
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+impl Bounds {
+    /// Whether two bodies come closer than `gap`.
+    fn meets(&self, other: &Bounds, gap: f64) -> bool {
+        (0..2).all(|i| self.lo[i] - gap <= other.hi[i] && other.lo[i] - gap <= self.hi[i])
+    }
+}
+
+fn bounds(
+    p: &Placement,
+    magnification: f64,
+    width: u32,
+    height: u32,
+    outline: &mut Vec<[f64; 2]>,
+) -> Bounds {
+    let empty = Bounds {
+        lo: [f64::INFINITY; 2],
+        hi: [f64::NEG_INFINITY; 2],
+    };
+    if p.blank {
+        return empty;
+    }
+    let pose = Pose {
+        entry: p.entry,
+        base_deg: p.base_deg,
+        angle_deg: p.angle_deg,
+        apex_px: p.apex_px,
+        px_per_um: px_per_um(width, magnification),
+    };
+    probe_outline(&p.probe, &pose, width, height, outline);
+    let (w, h) = (f64::from(width), f64::from(height));
+    outline
+        .iter()
+        .filter(|v| (0.0..=w).contains(&v[0]) && (0.0..=h).contains(&v[1]))
+        .fold(empty, |b, v| Bounds {
+            lo: [b.lo[0].min(v[0]), b.lo[1].min(v[1])],
+            hi: [b.hi[0].max(v[0]), b.hi[1].max(v[1])],
+        })
 }
 
 /// A few pixels of random drift, kept inside the apex placement range.

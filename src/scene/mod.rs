@@ -38,11 +38,11 @@ pub use background::{Needle, RealLook};
 pub use clutter::{Particle, Scratch};
 pub use generate::{random_frame, real_suite, suite, varied_look, BLANK_FRACTION};
 pub use geometry::{px_per_um, Edges, Entry, Pose, ProbeGeometry, Segment, FIELD_WIDTH_AT_1X_UM};
-pub use render::{force_nn, Renderer, Truth};
+pub use render::{force_nn, truth_of, Renderer, Truth};
 pub use session::{
     Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
 };
-pub use spec::{FrameSpec, Look, Style};
+pub use spec::{FrameSpec, Look, Others, Placement, Style, MAX_OTHER_PROBES};
 
 thread_local! {
     static RENDERER: RefCell<Renderer> = RefCell::new(Renderer::new());

@@ -123,6 +123,11 @@ impl Renderer {
             });
         }
         let truth = self.draw_probe(spec);
+        for k in 1..spec.probe_count() {
+            if let Some(other) = spec.nth_probe(k) {
+                self.draw_probe(&other);
+            }
+        }
         charge(&mut self.canvas, spec.look.charging_gain);
         self.blur
             .apply(&mut self.canvas, w, h, spec.look.blur_sigma_px);
@@ -173,18 +178,8 @@ impl Renderer {
     }
 
     fn draw_probe(&mut self, spec: &FrameSpec) -> Truth {
-        let ppu = spec.px_per_um();
         if spec.blank {
-            return Truth {
-                probe_in_view: false,
-                angle_deg: f64::NAN,
-                force_nn: f64::NAN,
-                tip_x: f64::NAN,
-                tip_y: f64::NAN,
-                magnification: spec.magnification,
-                px_per_um: ppu,
-                edges: None,
-            };
+            return truth_from(spec, None);
         }
         let w = spec.width as usize;
         let edges = probe_outline(
@@ -214,16 +209,7 @@ impl Renderer {
         } else {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, level);
         }
-        Truth {
-            probe_in_view: true,
-            angle_deg: spec.angle_deg,
-            force_nn: force_nn(spec),
-            tip_x: spec.apex_px[0],
-            tip_y: spec.apex_px[1],
-            magnification: spec.magnification,
-            px_per_um: ppu,
-            edges: Some(edges),
-        }
+        truth_from(spec, Some(edges))
     }
 
     /// Shifts a random `jitter_fraction` of the rows one pixel left or right.
@@ -245,6 +231,50 @@ impl Renderer {
                 row[..w - 1].copy_from_slice(&self.row[1..]);
             }
         }
+    }
+}
+
+/// The truth of `spec`'s own probe, without drawing it: what rendering `spec` returns
+/// (for another probe of a frame, [`FrameSpec::nth_probe`]).
+pub fn truth_of(spec: &FrameSpec) -> Truth {
+    if spec.blank {
+        return truth_from(spec, None);
+    }
+    let mut outline = Vec::new();
+    let edges = probe_outline(
+        &spec.probe,
+        &spec.pose(),
+        spec.width,
+        spec.height,
+        &mut outline,
+    );
+    truth_from(spec, Some(edges))
+}
+
+/// The truth of `spec`'s probe with its true `edges` (none: out of view).
+fn truth_from(spec: &FrameSpec, edges: Option<Edges>) -> Truth {
+    let ppu = spec.px_per_um();
+    match edges {
+        None => Truth {
+            probe_in_view: false,
+            angle_deg: f64::NAN,
+            force_nn: f64::NAN,
+            tip_x: f64::NAN,
+            tip_y: f64::NAN,
+            magnification: spec.magnification,
+            px_per_um: ppu,
+            edges: None,
+        },
+        Some(edges) => Truth {
+            probe_in_view: true,
+            angle_deg: spec.angle_deg,
+            force_nn: force_nn(spec),
+            tip_x: spec.apex_px[0],
+            tip_y: spec.apex_px[1],
+            magnification: spec.magnification,
+            px_per_um: ppu,
+            edges: Some(edges),
+        },
     }
 }
 

@@ -11,10 +11,10 @@ use std::path::{Path, PathBuf};
 use image::{GrayImage, ImageBuffer, Luma};
 
 use super::geometry::{Entry, ProbeGeometry};
-use super::render::{Renderer, Truth};
+use super::render::{truth_of, Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
-use crate::vision::Threshold;
+use crate::vision::{CalibrationConfig, Threshold, TrackerConfig};
 
 /// Magnifications an operator picks from (those of the public samples).
 pub const MAGNIFICATIONS: [f64; 6] = [1000.0, 1500.0, 2000.0, 3500.0, 5000.0, 8000.0];
@@ -87,9 +87,45 @@ impl Session {
     /// Where a person would click on the red, blue and green edges of the reference
     /// image: three points each, off by up to about a pixel, to 0.1 px.
     pub fn clicks(&self) -> Clicks {
-        let mut renderer = Renderer::new();
-        let truth = renderer.render_canvas(&self.reference);
-        let mut rng = Rng::new(self.click_seed);
+        self.clicks_of(0)
+    }
+
+    /// The names of the session's probes, in order: `probe` for a session of one probe
+    /// (its probe.toml gives it at the top level), else `probe1`, `probe2`, ... (its
+    /// `[[probe]]` entries, and the names of its `truth.<name>.csv` files).
+    pub fn probe_names(&self) -> Vec<String> {
+        match self.reference.probe_count() {
+            1 => vec!["probe".to_string()],
+            n => (1..=n).map(|k| format!("probe{k}")).collect(),
+        }
+    }
+
+    /// The `[tracker]` settings of probe `k` (as [`Session::probe_toml`] writes them),
+    /// its calibration clicks from [`Session::clicks_of`].
+    pub fn tracker_config_of(&self, k: usize) -> TrackerConfig {
+        let clicks = self.clicks_of(k);
+        TrackerConfig {
+            threshold: self.threshold,
+            window_deg: self.window_deg,
+            calibration: Some(CalibrationConfig {
+                reference_image: "reference.png".into(),
+                red: clicks.red,
+                blue: clicks.blue,
+                green: clicks.green,
+            }),
+            ..TrackerConfig::default()
+        }
+    }
+
+    /// As [`Session::clicks`] for probe `k` of the reference (0: its own, then the
+    /// others); none for a probe out of view.
+    pub fn clicks_of(&self, k: usize) -> Clicks {
+        let reference = self.reference.nth_probe(k).unwrap_or(self.reference);
+        let truth = truth_of(&reference);
+        let mut rng = Rng::new(match k {
+            0 => self.click_seed,
+            k => sub_seed(self.click_seed, k as u64),
+        });
         let mut click = |p: [f64; 2]| {
             let jitter =
                 |v: f64, rng: &mut Rng| (10.0 * (v + rng.uniform(-0.7, 0.7))).round() / 10.0;
@@ -111,7 +147,7 @@ impl Session {
         };
         // The reference beam is straight, so red clicks may reach beyond the end block,
         // as far as the frame allows.
-        let h_px = self.probe().pyramid_height_um * self.reference.px_per_um();
+        let h_px = reference.probe.pyramid_height_um * reference.px_per_um();
         let red_len = edges.red.length();
         let (w, h) = (
             f64::from(self.reference.width),
@@ -138,35 +174,55 @@ impl Session {
         }
     }
 
-    /// The `probe.toml` text (a configuration file: it parses with `Config::load`).
+    /// The `probe.toml` text (a configuration file: it parses with `Config::load`): one
+    /// probe at the top level, several as `[[probe]]` entries named as
+    /// [`Session::probe_names`].
     pub fn probe_toml(&self) -> String {
-        let probe = self.probe();
-        let clicks = self.clicks();
-        let points = |v: &[[f64; 2]]| {
-            let items: Vec<String> = v
-                .iter()
-                .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
-                .collect();
-            format!("[{}]", items.join(", "))
-        };
-        format!(
-            "# Probe and tracker settings for one recorded session.\n[cantilever]\n\
-             length_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n[tracker]\n\
-             threshold = {}\nwindow_deg = {:.1}\n\n[tracker.calibration]\n\
-             reference_image = \"reference.png\"  # relative to this file\n\
-             # pixels marked on each tip edge in the reference image; x right, y down\n\
-             red = {}\nblue = {}\ngreen = {}\n",
-            probe.length_um,
-            probe.spring_constant_n_per_m,
-            self.threshold,
-            self.window_deg,
-            points(&clicks.red),
-            points(&clicks.blue),
-            points(&clicks.green),
-        )
+        let names = self.probe_names();
+        let mut text = String::from("# Probe and tracker settings for one recorded session.\n");
+        for (k, name) in names.iter().enumerate() {
+            let prefix = match names.len() {
+                1 => String::new(),
+                _ => {
+                    let _ = write!(text, "\n[[probe]]\nname = \"{name}\"\n");
+                    "probe.".to_string()
+                }
+            };
+            let probe = self
+                .reference
+                .nth_probe(k)
+                .map_or(*self.probe(), |s| s.probe);
+            let clicks = self.clicks_of(k);
+            let points = |v: &[[f64; 2]]| {
+                let items: Vec<String> = v
+                    .iter()
+                    .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
+                    .collect();
+                format!("[{}]", items.join(", "))
+            };
+            let _ = write!(
+                text,
+                "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n\
+                 [{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n\n\
+                 [{prefix}tracker.calibration]\n\
+                 reference_image = \"reference.png\"  # relative to this file\n\
+                 # pixels marked on each tip edge in the reference image; x right, y down\n\
+                 red = {}\nblue = {}\ngreen = {}\n",
+                probe.length_um,
+                probe.spring_constant_n_per_m,
+                self.threshold,
+                self.window_deg,
+                points(&clicks.red),
+                points(&clicks.blue),
+                points(&clicks.green),
+            );
+        }
+        text
     }
 
-    /// Writes the session into `dir` (created if needed) and returns every frame's truth.
+    /// Writes the session into `dir` (created if needed) and returns every frame's truth
+    /// (of its first probe; with several probes, each probe's truth is in
+    /// `truth.<name>.csv`).
     pub fn write(&self, dir: &Path, format: FrameFormat) -> Result<Vec<Truth>, SessionError> {
         let frames_dir = dir.join("frames");
         std::fs::create_dir_all(&frames_dir).map_err(|source| SessionError::Io {
@@ -178,9 +234,13 @@ impl Session {
         let mut frame = GrayImage::new(1, 1);
         renderer.render_into(&self.reference, &mut frame);
         save(&frame, &dir.join("reference.png"), FrameFormat::Png)?;
-        let mut csv = String::from(
-            "frame,detected,angle_deg,force_nN,tip_x,tip_y,magnification,px_per_um,style,t_s\n",
-        );
+        let names = self.probe_names();
+        let mut csvs = vec![
+            String::from(
+                "frame,detected,angle_deg,force_nN,tip_x,tip_y,magnification,px_per_um,style,t_s\n",
+            );
+            names.len()
+        ];
         let mut truths = Vec::with_capacity(self.frames.len());
         for (k, spec) in self.frames.iter().enumerate() {
             let truth = renderer.render_into(spec, &mut frame);
@@ -191,10 +251,26 @@ impl Session {
                 .get(k)
                 .copied()
                 .unwrap_or(k as f64 / FRAME_RATE_HZ);
-            csv_row(&mut csv, &name, &truth, spec.look.style_name, t_s);
+            for (p, csv) in csvs.iter_mut().enumerate() {
+                let truth = match (p, spec.nth_probe(p)) {
+                    (0, _) => truth,
+                    (_, Some(other)) => truth_of(&other),
+                    (_, None) => truth_of(&FrameSpec {
+                        blank: true,
+                        ..*spec
+                    }),
+                };
+                csv_row(csv, &name, &truth, spec.look.style_name, t_s);
+            }
             truths.push(truth);
         }
-        write_text(&dir.join("truth.csv"), &csv)?;
+        for (csv, name) in csvs.iter().zip(&names) {
+            let file = match names.len() {
+                1 => "truth.csv".to_string(),
+                _ => format!("truth.{name}.csv"),
+            };
+            write_text(&dir.join(file), csv)?;
+        }
         Ok(truths)
     }
 }

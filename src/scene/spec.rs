@@ -161,6 +161,50 @@ pub struct FrameSpec {
     pub blank: bool,
     /// Seed of everything random in the frame (clutter, shading, noise, jitter).
     pub seed: u64,
+    /// More probes in the same view, drawn after the first with the frame's look; none
+    /// in every preset.
+    pub others: Others,
+}
+
+/// Most probes a frame shows besides its first (an S100 carries up to four positioners).
+pub const MAX_OTHER_PROBES: usize = 3;
+
+/// The other probes of a frame, up to [`MAX_OTHER_PROBES`], in order.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Others([Option<Placement>; MAX_OTHER_PROBES]);
+
+impl Others {
+    /// None.
+    pub const NONE: Others = Others([None; MAX_OTHER_PROBES]);
+
+    /// These probes, in order; more than [`MAX_OTHER_PROBES`] is a caller's error.
+    pub fn of(probes: &[Placement]) -> Others {
+        assert!(
+            probes.len() <= MAX_OTHER_PROBES,
+            "at most {MAX_OTHER_PROBES} other probes"
+        );
+        Others(std::array::from_fn(|k| probes.get(k).copied()))
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Placement> {
+        self.0.iter().flatten()
+    }
+
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = &mut Placement> {
+        self.0.iter_mut().flatten()
+    }
+}
+
+/// Another probe in a frame: its geometry and pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    pub probe: ProbeGeometry,
+    pub entry: Entry,
+    pub base_deg: f64,
+    pub angle_deg: f64,
+    pub apex_px: [f64; 2],
+    /// Out of view in this frame.
+    pub blank: bool,
 }
 
 impl FrameSpec {
@@ -181,7 +225,45 @@ impl FrameSpec {
             look: style.look(),
             blank: false,
             seed,
+            others: Others::NONE,
         }
+    }
+
+    /// The placement of this spec's own (first) probe.
+    pub fn placement(&self) -> Placement {
+        Placement {
+            probe: self.probe,
+            entry: self.entry,
+            base_deg: self.base_deg,
+            angle_deg: self.angle_deg,
+            apex_px: self.apex_px,
+            blank: self.blank,
+        }
+    }
+
+    /// How many probes the frame places (in view or not): its own and the others.
+    pub fn probe_count(&self) -> usize {
+        1 + self.others.iter().count()
+    }
+
+    /// Probe `k` of the frame (0: its own, then the others in order) as a frame of that
+    /// probe alone, with this frame's size, magnification, look and seed; its truth is
+    /// [`crate::scene::truth_of`] of it.
+    pub fn nth_probe(&self, k: usize) -> Option<FrameSpec> {
+        let place = match k {
+            0 => self.placement(),
+            k => *self.others.iter().nth(k - 1)?,
+        };
+        Some(FrameSpec {
+            probe: place.probe,
+            entry: place.entry,
+            base_deg: place.base_deg,
+            angle_deg: place.angle_deg,
+            apex_px: place.apex_px,
+            blank: place.blank,
+            others: Others::NONE,
+            ..*self
+        })
     }
 
     pub fn px_per_um(&self) -> f64 {
