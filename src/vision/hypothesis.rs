@@ -119,13 +119,16 @@ pub struct Prior {
 }
 
 impl Search {
-    /// The best-scoring hypothesis, if any pair of candidates is compatible.
+    /// The best-scoring hypothesis, if any pair of candidates is compatible; a
+    /// placement whose apex (detection pixels) is `ruled_out` is never shortlisted
+    /// (another probe's tip, when several are in view).
     pub fn run(
         &mut self,
         template: &Template,
         cands: &Candidates,
         edges: &EdgeMap,
         prior: Option<Prior>,
+        ruled_out: &dyn Fn([f64; 2]) -> bool,
     ) -> Option<Hypothesis> {
         self.shortlist.clear();
         self.shortlist.reserve(SHORTLIST);
@@ -137,11 +140,11 @@ impl Search {
                 if list[i].edge == list[j].edge {
                     continue;
                 }
-                self.consider(template, cands, &[i, j], size, prior);
+                self.consider(template, cands, &[i, j], size, prior, ruled_out);
                 for k in j + 1..n {
                     let e = [list[i].edge, list[j].edge, list[k].edge];
                     if e[2] != e[0] && e[2] != e[1] {
-                        self.consider(template, cands, &[i, j, k], size, prior);
+                        self.consider(template, cands, &[i, j, k], size, prior, ruled_out);
                     }
                 }
             }
@@ -173,6 +176,7 @@ impl Search {
         idx: &[usize],
         size: [f64; 2],
         prior: Option<Prior>,
+        ruled_out: &dyn Fn([f64; 2]) -> bool,
     ) {
         let list = &cands.list;
         let Some(psi) = common_psi(idx.iter().map(|&i| &list[i])) else {
@@ -221,6 +225,9 @@ impl Search {
             scan_scale(&rows[..2], psi, partial)
         };
         if let Some((pose, coverage, score, plateau)) = best {
+            if ruled_out(pose.apex) {
+                return;
+            }
             self.shortlist_insert(Hypothesis {
                 pose,
                 members,

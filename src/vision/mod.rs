@@ -23,7 +23,8 @@
 //! - `calibration`: the template learned from the reference image and clicked pixels;
 //! - `autocal`: the three edges found from one click on the apex (or none), for
 //!   calibration;
-//! - `overlay`: the paper's Figure 8 picture for a frame or a calibration.
+//! - `overlay`: the paper's Figure 8 picture for a frame or a calibration;
+//! - `probes`: several probes in one view, each with its own tracker.
 //!
 //! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
@@ -38,6 +39,7 @@ mod hough;
 mod hypothesis;
 mod options;
 mod overlay;
+mod probes;
 mod pyramid;
 mod refine;
 mod sigma;
@@ -55,7 +57,8 @@ pub use geometry::Line;
 pub use options::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
 };
-pub use overlay::{draw_calibration, draw_overlay};
+pub use overlay::{draw_calibration, draw_overlay, draw_overlays};
+pub use probes::{refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES};
 pub use simd::set_avx2;
 pub use tracker::Tracker;
 
@@ -135,6 +138,12 @@ pub enum Miss {
     /// A tip-like hypothesis passed every check above but its combined confidence is
     /// too low.
     LowConfidence,
+    /// Another probe's tracker placed its tip on the same body, more confidently
+    /// (several probes in one view: [`ProbeSet`]).
+    OtherProbe,
+    /// Its scale is unlike that of the other probes calibrated on the same reference
+    /// image, which one frame shows at one magnification ([`ProbeSet`]).
+    ScaleUnlikeOthers,
 }
 
 impl Miss {
@@ -154,6 +163,8 @@ impl Miss {
             Miss::WrongAppearance(Green) => "wrong-appearance-green",
             Miss::ScaleMismatch => "scale-mismatch",
             Miss::LowConfidence => "low-confidence",
+            Miss::OtherProbe => "other-probe",
+            Miss::ScaleUnlikeOthers => "scale-unlike-other-probes",
         }
     }
 }

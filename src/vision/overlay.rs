@@ -12,16 +12,28 @@ const APEX: Rgb<u8> = Rgb([255, 230, 0]);
 
 /// The frame in colour with the estimate's edges and apex drawn over it.
 pub fn draw_overlay(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
+    draw_overlays(frame, std::slice::from_ref(estimate))
+}
+
+/// The frame in colour with every estimate's edges and apex drawn over it (several
+/// probes in one view).
+pub fn draw_overlays(frame: &GrayImage, estimates: &[Estimate]) -> RgbImage {
     let mut out = to_rgb(frame);
+    for estimate in estimates {
+        draw_estimate(&mut out, estimate);
+    }
+    out
+}
+
+fn draw_estimate(out: &mut RgbImage, estimate: &Estimate) {
     for e in Edge::ALL {
         if let Some(fit) = &estimate.edges[e.index()] {
-            thick_segment(&mut out, fit.start_px, fit.end_px, COLOURS[e.index()]);
+            thick_segment(out, fit.start_px, fit.end_px, COLOURS[e.index()]);
         }
     }
     if let Some(apex) = estimate.apex_px {
-        mark(&mut out, apex);
+        mark(out, apex);
     }
-    out
 }
 
 /// The reference image with the calibrated edge segments and the apex.

@@ -22,6 +22,7 @@ use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::options::{PixelOrigin, Threshold, TrackerConfig};
+use super::probes::{Claim, MAX_PROBES};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::stations;
@@ -100,6 +101,25 @@ fn outranks(alt: &Estimate, best: &Estimate, first: f64) -> bool {
     alt.confidence > best.confidence.max(first + RIVAL_MARGIN) && edges(alt) >= edges(best)
 }
 
+/// The detection image of a frame and its edge map: the stages of [`Tracker::track`]
+/// that depend only on the frame, the binning and the edge threshold, which the
+/// trackers of several probes in one view share ([`super::ProbeSet`]).
+#[derive(Debug, Default)]
+pub struct Detection {
+    pyr: Pyramid,
+    edges: EdgeMap,
+    /// What `pyr` and `edges` hold of the frame being tracked: the binning factor and
+    /// the edge threshold's bits (None: `pyr` only); None: nothing of it.
+    built: Option<(u32, Option<u32>)>,
+}
+
+impl Detection {
+    /// Forgets the frame: the next tracker builds its own stages.
+    pub fn clear(&mut self) {
+        self.built = None;
+    }
+}
+
 /// The last confident estimate, for coherence.
 #[derive(Debug, Clone, Copy)]
 struct Last {
@@ -121,8 +141,12 @@ pub struct Tracker {
     pixel_origin: PixelOrigin,
     coherence: bool,
     last: Option<Last>,
-    pyr: Pyramid,
-    edges: EdgeMap,
+    /// `last` before the frame being tracked, for a second search of it.
+    last_before: Option<Last>,
+    /// Pyramids other probes' trackers claimed in the frame being tracked: a
+    /// hypothesis with its apex on one is not this probe (several probes in one view).
+    excluded: [Option<Claim>; MAX_PROBES - 1],
+    det: Detection,
     hough: Hough,
     cands: Candidates,
     search: Search,
@@ -148,8 +172,9 @@ impl Tracker {
             pixel_origin: cfg.pixel_origin,
             coherence: true,
             last: None,
-            pyr: Pyramid::default(),
-            edges: EdgeMap::default(),
+            last_before: None,
+            excluded: [None; MAX_PROBES - 1],
+            det: Detection::default(),
             hough: Hough::default(),
             cands: Candidates::default(),
             search: Search::default(),
@@ -180,6 +205,59 @@ impl Tracker {
 
     /// Tracks the tip in one 8-bit frame.
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
+        self.det.built = None;
+        self.excluded = [None; MAX_PROBES - 1];
+        self.track_frame(frame)
+    }
+
+    /// As [`Tracker::track`], with the detection stages `shared` holds for this frame
+    /// (from another probe's tracker) reused where they match this tracker's (the same
+    /// binning, the same edge threshold); `shared` then holds this tracker's.
+    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
+        std::mem::swap(&mut self.det, shared);
+        let estimate = self.track_frame(frame);
+        std::mem::swap(&mut self.det, shared);
+        estimate
+    }
+
+    /// Rules out the pyramids `claims` (other probes' tips in the frame about to be
+    /// tracked); none: nothing is ruled out.
+    pub(super) fn exclude(&mut self, claims: &[Claim]) {
+        self.excluded = std::array::from_fn(|k| claims.get(k).copied());
+    }
+
+    /// Rules out one more pyramid; false when it already was, or no room is left.
+    pub(super) fn exclude_more(&mut self, claim: Claim) -> bool {
+        if self.excluded.contains(&Some(claim)) {
+            return false;
+        }
+        match self.excluded.iter_mut().find(|c| c.is_none()) {
+            Some(slot) => {
+                *slot = Some(claim);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Tracks the frame just tracked again, from the state before it (with what is
+    /// now ruled out), sharing detection stages as [`Tracker::track_sharing`].
+    pub(super) fn retrack_sharing(
+        &mut self,
+        frame: &GrayImage,
+        shared: &mut Detection,
+    ) -> Estimate {
+        self.last = self.last_before;
+        self.track_sharing(frame, shared)
+    }
+
+    /// Whether a placement's apex (frame pixels) lies on a pyramid ruled out.
+    fn ruled_out(&self, apex: [f64; 2]) -> bool {
+        self.excluded.iter().flatten().any(|c| c.contains(apex))
+    }
+
+    fn track_frame(&mut self, frame: &GrayImage) -> Estimate {
+        self.last_before = self.last;
         let template = *self.calibration.template();
         let base = super::pyramid::binning_factor(frame.width());
         self.detect(frame, &template, base);
@@ -211,7 +289,7 @@ impl Tracker {
             .map(|e| self.calibration.edge(e).contrast.abs())
             .into_iter()
             .fold(f64::INFINITY, f64::min);
-        if broken && faintest < RETRY_CONTRAST_NOISES * f64::from(self.edges.noise) {
+        if broken && faintest < RETRY_CONTRAST_NOISES * f64::from(self.det.edges.noise) {
             self.detect(frame, &template, COARSE_RETRY * base);
             if let Some(e) = self.attempt(frame, &template, None).filter(|e| e.detected) {
                 estimate = e;
@@ -229,21 +307,30 @@ impl Tracker {
     /// The detection stages (binning, edges, Hough, line candidates) on the frame binned
     /// `factor x factor`.
     fn detect(&mut self, frame: &GrayImage, template: &Template, factor: u32) {
-        self.pyr.build_binned(frame, factor);
+        let det = &mut self.det;
+        if det.built.is_none_or(|(f, _)| f != factor) {
+            det.pyr.build_binned(frame, factor);
+            det.built = Some((factor, None));
+        }
         let threshold = if self.calibration.grey_mask() {
-            self.pyr.threshold(self.threshold)
+            det.pyr.threshold(self.threshold)
         } else {
             f32::NEG_INFINITY
         };
-        self.edges.detect(&self.pyr, threshold);
-        let (w, h) = (self.pyr.width, self.pyr.height);
+        let built = Some((factor, Some(threshold.to_bits())));
+        if det.built != built {
+            det.edges.detect(&det.pyr, threshold);
+            det.built = built;
+        }
+        let (w, h) = (det.pyr.width, det.pyr.height);
         self.hough
             .configure(w, h, self.window_rad, template.gradient_angles());
-        self.hough.vote(&self.edges.points, self.edges.noise);
+        self.hough
+            .vote(&self.det.edges.points, self.det.edges.noise);
         self.hough.find_peaks();
         self.cands.build(
             &self.hough.peaks,
-            &self.edges.points,
+            &self.det.edges.points,
             &self.hough.voters,
             template.gradient_angles(),
             [w, h],
@@ -260,7 +347,16 @@ impl Tracker {
         if self.cands.list.len() < 2 {
             return Some(Estimate::missed(Miss::NoCandidates, 0.0));
         }
-        let Some(hyp) = self.search.run(t, &self.cands, &self.edges, prior) else {
+        // Placements on another probe's claimed pyramid are not this probe's.
+        let (excluded, pyr) = (&self.excluded, &self.det.pyr);
+        let ruled_out = |apex: [f64; 2]| {
+            let apex = pyr.to_frame(apex);
+            excluded.iter().flatten().any(|c| c.contains(apex))
+        };
+        let Some(hyp) = self
+            .search
+            .run(t, &self.cands, &self.det.edges, prior, &ruled_out)
+        else {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
         };
         if !complete(&hyp) {
@@ -310,11 +406,11 @@ impl Tracker {
         t: &Template,
         hyp: &Hypothesis,
     ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
-        let k = self.pyr.factor as f64;
+        let k = self.det.pyr.factor as f64;
         let pose = Pose {
             psi: hyp.pose.psi,
             scale: hyp.pose.scale * k,
-            apex: self.pyr.to_frame(hyp.pose.apex),
+            apex: self.det.pyr.to_frame(hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
         // Fit the edges the search found: its lines, and a left-out edge only where the
@@ -439,6 +535,11 @@ impl Tracker {
                 contrast: r.contrast,
             });
         }
+        let apex = t.true_apex(pose, self.edge_bias_px);
+        if self.ruled_out(apex) {
+            // Not a verdict on this probe: the runners-up are tried.
+            return Estimate::missed(Miss::OtherProbe, 0.0);
+        }
         let angle_deg = screen_deg_from_image_rad(pose.psi);
         let force = self.cantilever.map(|c| c.force_nn(angle_deg));
         Estimate {
@@ -446,7 +547,7 @@ impl Tracker {
             angle_deg: Some(angle_deg),
             force_nn: force.map(|f| f.value),
             force_saturated: force.is_some_and(|f| f.saturated),
-            apex_px: Some(t.true_apex(pose, self.edge_bias_px)),
+            apex_px: Some(apex),
             edges,
             angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_sigma)),
             scale: Some(pose.scale),

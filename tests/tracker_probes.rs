@@ -1,0 +1,179 @@
+//! Several probes in one view (`vision::ProbeSet`): rendered sessions of two probes
+//! facing each other at 640x480 and of four at 1024x768 (`Session::several`), every
+//! probe calibrated on the shared reference from its own clicks and tracked in every
+//! frame. Each probe is scored against its own truth, as `replay` writes its own CSV:
+//! detection, no detection while it is out of view (the other probes still in it), no
+//! tip placed on another probe, and the rendered suite's accuracy.
+//!
+//! The seeds are generated; `PROBES_SEED=n` runs another (the thresholds were set on 3,
+//! 5 and 8 and checked on the held-out 11). Run with `cargo test --release --test
+//! tracker_probes`.
+mod tracker_support;
+
+use image::GrayImage;
+use nanoforce::scene::{render_into, truth_of, Session};
+use nanoforce::vision::{Calibration, Estimate, Miss, ProbeSet, Tracker};
+use tracker_support::{score, Truth};
+
+fn seed(default: u64) -> u64 {
+    std::env::var("PROBES_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Every probe of `session` calibrated on its reference from its own clicks, without
+/// coherence (the frames are in random order).
+fn trackers(session: &Session) -> Vec<Tracker> {
+    let mut reference = GrayImage::new(1, 1);
+    render_into(&session.reference, &mut reference);
+    (0..session.reference.probe_count())
+        .map(|k| {
+            let cfg = session.tracker_config_of(k);
+            let clicks = cfg.calibration.as_ref().expect("given");
+            let cal = Calibration::from_reference(&reference, clicks, &cfg)
+                .unwrap_or_else(|e| panic!("probe {k} calibrates: {e}"));
+            let probe = session.reference.nth_probe(k).expect("placed").probe;
+            let mut tracker = Tracker::new(&cfg, cal, Some(probe.cantilever()));
+            tracker.set_coherence(false);
+            tracker
+        })
+        .collect()
+}
+
+/// Renders and tracks every frame; per probe, its truth and estimates.
+fn run(session: &Session) -> Vec<(Vec<Truth>, Vec<Estimate>)> {
+    let probes = session.reference.probe_count();
+    let mut set = ProbeSet::new(trackers(session), &vec![0; session.reference.probe_count()]);
+    let mut per_probe = vec![(Vec::new(), Vec::new()); probes];
+    let mut frame = GrayImage::new(1, 1);
+    let mut estimates = vec![Estimate::default(); probes];
+    for (i, spec) in session.frames.iter().enumerate() {
+        render_into(spec, &mut frame);
+        set.track(&frame, &mut estimates);
+        for (k, (truths, found)) in per_probe.iter_mut().enumerate() {
+            let t = truth_of(&spec.nth_probe(k).expect("placed"));
+            truths.push(Truth {
+                frame: format!("frame_{i:05}"),
+                detected: t.probe_in_view,
+                angle_deg: t.angle_deg,
+                force_nn: t.force_nn,
+                tip: [t.tip_x, t.tip_y],
+                magnification: t.magnification,
+                style: spec.look.style_name.to_string(),
+            });
+            found.push(estimates[k]);
+        }
+    }
+    per_probe
+}
+
+/// Checks each probe's score: detection, no detection while it is out of view, no true
+/// tip refused as another probe's or for its scale (the bodies are apart, the
+/// magnification one), and its accuracy. The probes are
+/// 45-260 px tall (1000x-2000x: each must keep to its part of the view), smaller than
+/// the single-probe suite's, and the misses are the single-probe tracker's (harsh and
+/// noisy frames refused by the scale checks): `each_probe_tracks_as_it_would_alone`
+/// shows the other probes cost next to nothing. Measured per probe on seeds 3, 5, 8
+/// and 11: detection 97.8-100 %, angle median 0.0095-0.0225 deg, p95 0.055-0.128 deg.
+fn check(name: &str, per_probe: &[(Vec<Truth>, Vec<Estimate>)]) {
+    for (k, (t, e)) in per_probe.iter().enumerate() {
+        let sc = score(t, e);
+        let why = format!("{name}, probe {}: {sc:?}", k + 1);
+        println!("{why}");
+        let others = t
+            .iter()
+            .zip(e)
+            .filter(|(t, e)| {
+                t.detected && matches!(e.miss, Some(Miss::OtherProbe | Miss::ScaleUnlikeOthers))
+            })
+            .count();
+        assert!(sc.detect_rate >= 0.975, "{why}");
+        assert_eq!(sc.false_detections, 0, "{why}");
+        assert!(sc.angle_err_median_deg <= 0.025, "{why}");
+        assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
+        assert!(sc.tip_err_median_px <= 0.2, "{why}");
+        assert_eq!(others, 0, "{why}: refused as another probe's body or scale");
+    }
+}
+
+#[test]
+fn two_probes_facing_each_other_are_each_tracked() {
+    let session = Session::several(seed(3), 2, 300, 640, 480);
+    let per_probe = run(&session);
+    let blank: usize = per_probe
+        .iter()
+        .map(|(t, _)| t.iter().filter(|t| !t.detected).count())
+        .sum();
+    assert!(blank > 10, "the session puts probes out of view: {blank}");
+    check("two probes", &per_probe);
+}
+
+#[test]
+fn each_probe_tracks_as_it_would_alone() {
+    // The same frames with only probe k drawn: the other probe in view costs it no
+    // accuracy and at most one frame in a hundred.
+    let session = Session::several(seed(3), 2, 300, 640, 480);
+    let together = run(&session);
+    for (k, (t, e)) in together.iter().enumerate() {
+        // Every other probe out of view; the rest of the frame (its substrate, clutter
+        // and noise) as it was.
+        let mut alone = session.clone();
+        for frame in &mut alone.frames {
+            frame.blank |= k != 0;
+            for (j, other) in frame.others.iter_mut().enumerate() {
+                other.blank |= j + 1 != k;
+            }
+        }
+        let mut tracker = trackers(&session).swap_remove(k);
+        let mut frame = GrayImage::new(1, 1);
+        let found: Vec<Estimate> = alone
+            .frames
+            .iter()
+            .map(|spec| {
+                render_into(spec, &mut frame);
+                tracker.track(&frame)
+            })
+            .collect();
+        let (with, without) = (score(t, e), score(t, &found));
+        let why = format!(
+            "probe {}: with the other {with:?}\nalone {without:?}",
+            k + 1
+        );
+        // The other probe moves the frame's Otsu threshold a little: on harsh frames a
+        // face can lose its edge pixels (seed 8: 2 of 284 frames).
+        assert!(with.detect_rate >= without.detect_rate - 0.01, "{why}");
+        assert!(
+            with.angle_err_median_deg <= 1.1 * without.angle_err_median_deg,
+            "{why}"
+        );
+        assert!(
+            with.angle_err_p95_deg <= 1.1 * without.angle_err_p95_deg,
+            "{why}"
+        );
+    }
+}
+
+#[test]
+fn four_probes_in_one_view_are_each_tracked() {
+    let session = Session::several(seed(3), 4, 100, 1024, 768);
+    check("four probes", &run(&session));
+}
+
+#[test]
+fn a_probe_set_tracks_each_probe_as_its_tracker_does() {
+    // Sharing the detection stages changes nothing: each probe of a set gives what
+    // its tracker alone gives on the same frame.
+    let session = Session::several(seed(3), 2, 40, 640, 480);
+    let mut set = ProbeSet::new(trackers(&session), &[0, 0]);
+    let mut alone = trackers(&session);
+    let mut frame = GrayImage::new(1, 1);
+    let mut estimates = vec![Estimate::default(); 2];
+    for spec in &session.frames {
+        render_into(spec, &mut frame);
+        set.track(&frame, &mut estimates);
+        for (k, tracker) in alone.iter_mut().enumerate() {
+            assert_eq!(estimates[k], tracker.track(&frame), "probe {}", k + 1);
+        }
+    }
+}
