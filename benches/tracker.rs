@@ -4,16 +4,18 @@
 //!   (a busy low-magnification frame, a mid one, a high-magnification one, a blank one)
 //!   and a public sample frame;
 //! - `window/<deg>`: the same 640x480 frame for a Hough window of 10, 20 and 40 deg;
-//! - `clutter/<scratches>`: the same frame with more and more clutter.
+//! - `clutter/<scratches>`: the same frame with more and more clutter;
+//! - `probes/<size>/<n>-of-<count>`: two probes at 640x480 and four at 1024x768 in
+//!   one view, and the first of them alone on the same frames.
 //!
 //! `cargo bench --bench tracker`; docs/tracker.md records the numbers.
 use std::path::Path;
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use image::GrayImage;
 use nanoforce::config::{CalibrationConfig, Config, TrackerConfig};
 use nanoforce::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
-use nanoforce::vision::{Calibration, Tracker};
+use nanoforce::vision::{Calibration, Estimate, ProbeSet, Tracker};
 
 /// A session of the typical probe at `width`, calibrated, with the given frames.
 fn tracker_for(width: u32, window_deg: f64) -> (Setup, Tracker) {
@@ -75,13 +77,17 @@ fn bench_sizes(c: &mut Criterion) {
     // A public sample frame as recorded.
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/samples/mixed");
     let config = Config::load(&dir.join("probe.toml")).expect("sample config");
-    let clicks = config.tracker.calibration.clone().expect("calibration");
+    let clicks = config.probes[0]
+        .tracker
+        .calibration
+        .clone()
+        .expect("calibration");
     let reference = image::open(&clicks.reference_image)
         .expect("reference")
         .to_luma8();
-    let cal =
-        Calibration::from_reference(&reference, &clicks, &config.tracker).expect("calibrates");
-    let mut tracker = Tracker::new(&config.tracker, cal, config.cantilever);
+    let cal = Calibration::from_reference(&reference, &clicks, &config.probes[0].tracker)
+        .expect("calibrates");
+    let mut tracker = Tracker::new(&config.probes[0].tracker, cal, config.probes[0].cantilever);
     tracker.set_coherence(false);
     let img = image::open(dir.join("frames/frame_00001.png"))
         .expect("frame")
@@ -125,5 +131,54 @@ fn bench_clutter(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_sizes, bench_window, bench_clutter);
+/// `probes/<size>/<n>-of-<count>`: several probes in one view (`ProbeSet`): the first
+/// probe alone and all `count`, per frame over eight frames of mixed looks with every
+/// probe in view.
+fn bench_probes(c: &mut Criterion) {
+    let mut group = c.benchmark_group("probes");
+    for (count, width, height) in [(2usize, 640u32, 480u32), (4, 1024, 768)] {
+        let session = Session::several(3, count, 40, width, height);
+        let (reference, _) = scene::render(&session.reference);
+        let frames: Vec<GrayImage> = session
+            .frames
+            .iter()
+            .filter(|f| (0..count).all(|k| f.nth_probe(k).is_some_and(|p| !p.blank)))
+            .take(8)
+            .map(|f| scene::render(f).0)
+            .collect();
+        group.throughput(Throughput::Elements(frames.len() as u64));
+        // The first probe alone on the same frames, then all of them.
+        for n in [1, count] {
+            let trackers = (0..n)
+                .map(|k| {
+                    let cfg = session.tracker_config_of(k);
+                    let clicks = cfg.calibration.as_ref().expect("clicks");
+                    let cal = Calibration::from_reference(&reference, clicks, &cfg)
+                        .expect("the rendered reference calibrates");
+                    let mut tracker = Tracker::new(&cfg, cal, None);
+                    tracker.set_coherence(false);
+                    tracker
+                })
+                .collect();
+            let mut set = ProbeSet::new(trackers, &vec![0; n]);
+            let mut out = vec![Estimate::default(); n];
+            let name = BenchmarkId::new(format!("{width}x{height}"), format!("{n}-of-{count}"));
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    for f in &frames {
+                        set.track(f, &mut out);
+                    }
+                })
+            });
+        }
+    }
+}
+
+criterion_group!(
+    benches,
+    bench_sizes,
+    bench_window,
+    bench_clutter,
+    bench_probes
+);
 criterion_main!(benches);

@@ -26,7 +26,7 @@ fn main() -> anyhow::Result<()> {
     let config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml"))?;
     let contact = Contact {
         sample: config.sim.sample.clone(),
-        cantilever: config.cantilever.unwrap(),
+        cantilever: config.probes[0].cantilever.unwrap(),
         press_direction: config.teleop.press_direction_stage,
     };
     let scene = SemScene::new(

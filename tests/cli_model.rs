@@ -114,8 +114,7 @@ fn config_adds_the_force_in_nanonewtons() {
     assert!(output.status.success(), "{}", stderr(&output));
     let text = stdout(&output);
     assert!(text.starts_with("angle_deg,alpha,delta_over_l,shortening_over_l,force_nN\n"));
-    let scale_nn = Config::load(config)
-        .expect("sample config")
+    let scale_nn = Config::load(config).expect("sample config").probes[0]
         .cantilever
         .expect("the sample has [cantilever]")
         .force_scale_nn();

@@ -496,3 +496,55 @@ fn a_probe_without_a_cantilever_is_tracked_for_its_pose_only() {
         "{err}"
     );
 }
+
+#[test]
+fn several_probes_get_one_results_file_each() {
+    // Two probes facing each other in one view, rendered with their truth: replay
+    // writes out.<name>.csv per probe in the one format, each scoring against its own
+    // truth; the overlays draw both; `run` (one probe felt) refuses the file.
+    let dir = tempfile::tempdir().unwrap();
+    let session = nanoforce::scene::Session::several(21, 2, 12, 640, 480);
+    session
+        .write(dir.path(), nanoforce::scene::FrameFormat::Png)
+        .unwrap();
+    let config = dir.path().join("probe.toml");
+    let csv = dir.path().join("out.csv");
+    let overlays = dir.path().join("overlays");
+    let out = replay(
+        &dir.path().join("frames"),
+        &config,
+        &csv,
+        &["--overlay", overlays.to_str().unwrap()],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("probe1 ") && err.contains("probe2 "), "{err}");
+    assert!(!csv.exists(), "one file per probe, none for the set");
+    for name in ["probe1", "probe2"] {
+        let results = dir.path().join(format!("out.{name}.csv"));
+        let header = std::fs::read_to_string(&results).unwrap();
+        assert!(header.starts_with(&nanoforce::session::results::header()));
+        let truth =
+            nanoforce::session::score::read_truth(&dir.path().join(format!("truth.{name}.csv")))
+                .unwrap();
+        let rows = nanoforce::session::results::read_results(&results).unwrap();
+        let score = nanoforce::session::score::score(&truth, &rows);
+        assert_eq!(score.detect_rate, 1.0, "{name}: {score:?}");
+        assert_eq!(score.false_detections, 0, "{name}: {score:?}");
+        assert!(score.angle_err_p95_deg < 0.15, "{name}: {score:?}");
+    }
+    assert_eq!(std::fs::read_dir(&overlays).unwrap().count(), 12);
+    let run = Command::new(BIN)
+        .args(["run", "--duration-s", "1", "--config"])
+        .arg(&config)
+        .arg("--state-dir")
+        .arg(dir.path().join("state"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{err}");
+    assert!(
+        err.contains("2 [[probe]] entries") && err.contains("replay"),
+        "{err}"
+    );
+}

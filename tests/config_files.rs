@@ -7,8 +7,8 @@ use nanoforce::config::Config;
 fn shipped_example_probe_config_is_valid() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/probe.example.toml");
     let cfg = Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(cfg.cantilever.map(|c| c.length_um), Some(434.675));
-    assert!(cfg.tracker.calibration.is_some());
+    assert_eq!(cfg.probes[0].cantilever.map(|c| c.length_um), Some(434.675));
+    assert!(cfg.probes[0].tracker.calibration.is_some());
 }
 
 #[test]
@@ -19,7 +19,11 @@ fn public_sample_configs_are_valid() {
             .join(name)
             .join("probe.toml");
         let cfg = Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        let cal = cfg.tracker.calibration.expect("calibration block");
+        let cal = cfg.probes[0]
+            .tracker
+            .calibration
+            .clone()
+            .expect("calibration block");
         assert!(
             cal.reference_image.exists(),
             "{}",

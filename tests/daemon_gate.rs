@@ -182,15 +182,23 @@ fn run_suite(seed: u64) {
     let teleop = &config.teleop;
     let contact = Contact {
         sample: config.sim.sample.clone(),
-        cantilever: config.cantilever.unwrap(),
+        cantilever: config.probes[0].cantilever.unwrap(),
         press_direction: teleop.press_direction_stage,
     };
     let mut sem = config.sim.sem.clone();
     sem.seed = seed;
     let scene = SemScene::new(sem, contact, teleop.pressing_force_sign);
-    let (reference, clicks) = scene.reference(config.tracker.threshold, config.tracker.window_deg);
-    let calibration = Calibration::from_reference(&reference, &clicks, &config.tracker).unwrap();
-    let tracker = Tracker::new(&config.tracker, calibration, config.cantilever);
+    let (reference, clicks) = scene.reference(
+        config.probes[0].tracker.threshold,
+        config.probes[0].tracker.window_deg,
+    );
+    let calibration =
+        Calibration::from_reference(&reference, &clicks, &config.probes[0].tracker).unwrap();
+    let tracker = Tracker::new(
+        &config.probes[0].tracker,
+        calibration,
+        config.probes[0].cantilever,
+    );
 
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("frames.fifo");
@@ -239,7 +247,7 @@ fn run_suite(seed: u64) {
     let s = outcome.stats;
     eprintln!("seed {seed}: {}", serde_json::to_string(&s.safety).unwrap());
 
-    let limit_nn = config.cantilever.unwrap().force_nn(0.3).value;
+    let limit_nn = config.probes[0].cantilever.unwrap().force_nn(0.3).value;
     // The attack was real: the tracker reported large false forces ...
     let (false_nn, detected) =
         column_max(&session.join("estimates.csv"), "force_nN", Some("detected"));

@@ -17,16 +17,20 @@ fn mixed_session_layout_parses_with_config_load() {
     let session = Session::mixed(42, 12, 640, 480);
     let truths = session.write(dir.path(), FrameFormat::Png).expect("write");
     let cfg = Config::load(&dir.path().join("probe.toml")).expect("probe.toml parses");
-    let cantilever = cfg
+    let cantilever = cfg.probes[0]
         .cantilever
         .expect("the session's probe.toml has [cantilever]");
     assert!((cantilever.length_um - session.probe().length_um).abs() < 1e-9);
     let force_scale = session.probe().cantilever().force_scale_nn();
     assert!((cantilever.force_scale_nn() / force_scale - 1.0).abs() < 1e-12);
-    let cal = cfg.tracker.calibration.expect("calibration");
+    let cal = cfg.probes[0]
+        .tracker
+        .calibration
+        .clone()
+        .expect("calibration");
     assert_eq!(cal.reference_image, dir.path().join("reference.png"));
     assert!(cal.reference_image.exists());
-    assert_eq!(cfg.tracker.threshold, Threshold::Otsu);
+    assert_eq!(cfg.probes[0].tracker.threshold, Threshold::Otsu);
     let csv = read(&dir.path().join("truth.csv"));
     let mut lines = csv.lines();
     assert_eq!(
@@ -96,6 +100,7 @@ fn sessions_are_deterministic_and_formats_decode() {
     assert!(matches!(
         Config::load(&a.path().join("probe.toml"))
             .expect("parses")
+            .probes[0]
             .tracker
             .threshold,
         Threshold::Level(_)

@@ -49,7 +49,7 @@ fn run_lab(text: &str, seconds: f64) -> (RunStats, tempfile::TempDir) {
         session_dir: Some(session.path().to_path_buf()),
         loop_options: config.daemon.loop_options.clone(),
         clock,
-        pixel_origin: config.tracker.pixel_origin,
+        pixel_origin: config.probes[0].tracker.pixel_origin,
         stream: config.stream.clone(),
         ..RunOptions::default()
     };

@@ -63,7 +63,7 @@ fn sequence_sample_with_and_without_coherence() {
 /// and its shift per pixel of `edge_bias_px` (the shift is linear in the bias).
 fn corner_apexes(s: &Session) -> Vec<Option<([f64; 2], [f64; 2])>> {
     let at = |bias: f64| {
-        let mut cfg = s.config.tracker.clone();
+        let mut cfg = s.config.probes[0].tracker.clone();
         cfg.pixel_origin = PixelOrigin::Corner;
         cfg.edge_bias_px = bias;
         s.run_with(&cfg, false)
@@ -143,21 +143,13 @@ fn forces_follow_the_model_and_the_truth() {
     let est = s.run(false);
     for (t, e) in s.truth.iter().zip(&est) {
         let angle = e.angle_deg.expect("detected");
-        let model = s.config.cantilever.unwrap().force_nn(angle);
+        let model = s.config.probes[0].cantilever.unwrap().force_nn(angle);
         assert_eq!(e.force_nn, Some(model.value));
         assert!(!e.force_saturated);
         // The force error is the angle error times the local stiffness.
-        let per_deg = s
-            .config
-            .cantilever
-            .unwrap()
-            .force_nn(t.angle_deg + 0.5)
-            .value
-            - s.config
-                .cantilever
-                .unwrap()
-                .force_nn(t.angle_deg - 0.5)
-                .value;
+        let cantilever = s.config.probes[0].cantilever.unwrap();
+        let per_deg = cantilever.force_nn(t.angle_deg + 0.5).value
+            - cantilever.force_nn(t.angle_deg - 0.5).value;
         let allowed = per_deg.abs() * 0.12 + 1e-9;
         assert!(
             (model.value - t.force_nn).abs() <= allowed,
@@ -174,7 +166,7 @@ fn the_reference_reads_zero_and_clicks_are_refined() {
     for name in ["mixed", "sequence"] {
         let s = sample(name);
         let cal = s.calibrate();
-        let mut tracker = Tracker::new(&s.config.tracker, cal.clone(), None);
+        let mut tracker = Tracker::new(&s.config.probes[0].tracker, cal.clone(), None);
         let e = tracker.track(&s.reference);
         let angle = e.angle_deg.expect("the reference is detected");
         assert!(angle.abs() < 0.005, "{name}: reference reads {angle}");
@@ -213,8 +205,8 @@ fn result_csvs_for_nanoforce_score() {
 #[test]
 fn bad_calibration_input_is_named() {
     let s = sample("mixed");
-    let clicks = s.config.tracker.calibration.clone().unwrap();
-    let cfg = &s.config.tracker;
+    let clicks = s.config.probes[0].tracker.calibration.clone().unwrap();
+    let cfg = &s.config.probes[0].tracker;
     let mut outside = clicks.clone();
     outside.blue[1] = [700.0, 20.0];
     let err = Calibration::from_reference(&s.reference, &outside, cfg).unwrap_err();
@@ -261,7 +253,7 @@ fn bad_calibration_input_is_named() {
 fn overlays_draw_the_edges_in_their_colours() {
     let s = sample("mixed");
     let cal = s.calibrate();
-    let mut tracker = Tracker::new(&s.config.tracker, cal.clone(), None);
+    let mut tracker = Tracker::new(&s.config.probes[0].tracker, cal.clone(), None);
     let frame = s.frame("frame_00001.png");
     let est = tracker.track(&frame);
     let img = draw_overlay(&frame, &est);

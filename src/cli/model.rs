@@ -19,6 +19,9 @@ pub struct ModelArgs {
     /// Probe config (TOML with a [cantilever] section): adds a force_nN column.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Which probe's cantilever, when the config has several [[probe]] entries.
+    #[arg(long, value_name = "NAME", requires = "config")]
+    pub probe: Option<String>,
 }
 
 const LONG_ABOUT: &str = "\
@@ -72,7 +75,27 @@ pub fn run(args: ModelArgs) -> anyhow::Result<ExitCode> {
     let cantilever = match &args.config {
         Some(path) => {
             let config = Config::load(path)?;
-            let cantilever = config
+            let names = || {
+                let names: Vec<&str> = config.probes.iter().map(|p| p.name.as_str()).collect();
+                names.join(", ")
+            };
+            let probe = match (&args.probe, config.probes.as_slice()) {
+                (None, [probe]) => probe,
+                (None, _) => anyhow::bail!(
+                    "{}: several probes ({}): name one with --probe",
+                    path.display(),
+                    names()
+                ),
+                (Some(name), probes) => match probes.iter().find(|p| &p.name == name) {
+                    Some(probe) => probe,
+                    None => anyhow::bail!(
+                        "{}: no probe named {name} (its probes: {})",
+                        path.display(),
+                        names()
+                    ),
+                },
+            };
+            let cantilever = probe
                 .cantilever
                 .with_context(|| format!("{}: no [cantilever] section to model", path.display()))?;
             Some(cantilever)

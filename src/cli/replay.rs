@@ -19,12 +19,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::replay_pool::{replay_frames, Frames, Job};
 use crate::config::Config;
-use crate::daemon::lab::{live_tracker, tracker_from_config};
+use crate::daemon::lab::{live_tracker, probe_trackers};
 use crate::hw::frames::recording::FrameFile;
 use crate::session::frames::list_frames;
 use crate::session::live::{is_live_session, SessionInfo, CONFIG_FILE, SESSION_FILE};
 use crate::session::results;
-use crate::vision::Tracker;
+use crate::vision::ProbeSet;
 
 /// Track the tip in a recorded session's frames and write the results CSV.
 #[derive(Debug, Args)]
@@ -53,6 +53,11 @@ capture time), processing_ms (with --timing), seq, published_s and true_force_nN
 only a live run's estimates.csv, which has these same columns, fills them) and felt \
 (1: a force the operator may feel, detected and not clamped). Without --timing the \
 CSV is identical from run to run.\n\n\
+Several probes in one view (a configuration with [[probe]] entries): every probe is \
+tracked in every frame, and each gets its own CSV in the format above, named after it: \
+--csv out.csv writes out.<name>.csv for each probe name (processing_ms is then the frame's \
+time for all of them). A frame where two probes' trackers place their tips on one body \
+keeps it for the more confident, the other's row saying miss = other-probe.\n\n\
 Overlays (--overlay DIR) are PNG files named after their frame: a PNG frame keeps its \
 name (frame_00001.png), any other frame gets its full name plus .png (frame_00001.tif \
 becomes frame_00001.tif.png), so x.png and x.tif never share an overlay. Outputs never \
@@ -72,7 +77,8 @@ pub struct ReplayArgs {
     /// a recorded session: the configuration it ran with).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Where to write the results.
+    /// Where to write the results (with several probes: FILE's name with each probe's
+    /// name before the extension, out.csv -> out.<name>.csv).
     #[arg(long, value_name = "FILE")]
     pub csv: PathBuf,
     /// Also write each frame with the found edges drawn (red, blue, green) and the apex.
@@ -94,7 +100,8 @@ pub struct ReplayArgs {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplaySummary {
     pub frames: usize,
-    pub detected: usize,
+    /// Per probe: its name and the frames it was detected in.
+    pub detected: Vec<(String, usize)>,
     pub unreadable: usize,
     /// Frames whose SEM metadata gave a pixel size.
     pub with_scale: usize,
@@ -108,28 +115,49 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         .then(|| SessionInfo::read(&args.frames_dir))
         .transpose()?;
     let (config, config_path) = load_config(&args, session.as_ref())?;
-    // One tracker now, so a bad calibration is reported before anything is written.
-    let tracker = || match session {
-        Some(_) => live_tracker(&config),
-        None => tracker_from_config(&config),
+    // The trackers once now, so a bad calibration is reported before anything is
+    // written.
+    let references: Vec<_> = config
+        .probes
+        .iter()
+        .map(|p| {
+            p.tracker
+                .calibration
+                .as_ref()
+                .map(|c| c.reference_image.clone())
+        })
+        .collect();
+    let probes = || match session {
+        Some(_) => Ok(ProbeSet::new(vec![live_tracker(&config)?], &[()])),
+        None => Ok(ProbeSet::new(probe_trackers(&config)?, &references)),
     };
-    tracker()?;
+    probes()?;
+    let names: Vec<&str> = config.probes.iter().map(|p| p.name.as_str()).collect();
     let inputs = Inputs {
         config: &config_path,
-        reference: config
-            .tracker
-            .calibration
-            .as_ref()
-            .map(|c| c.reference_image.as_path()),
+        references: config
+            .probes
+            .iter()
+            .filter_map(|p| p.tracker.calibration.as_ref())
+            .map(|c| c.reference_image.as_path())
+            .collect(),
+        csvs: csv_paths(&args.csv, &names),
     };
     let summary = match &session {
-        Some(info) => replay_session(&args, info, &inputs, &tracker)?,
-        None => replay(&args, &inputs, &tracker)?,
+        Some(info) => replay_session(&args, info, &inputs, &probes)?,
+        None => replay(&args, &inputs, &probes)?,
+    };
+    let detected = match summary.detected.as_slice() {
+        [(_, n)] => format!("{n} detected"),
+        several => several
+            .iter()
+            .map(|(name, n)| format!("{name} {n} detected"))
+            .collect::<Vec<_>>()
+            .join(", "),
     };
     eprintln!(
-        "replayed {} frames: {} detected, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
+        "replayed {} frames: {detected}, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,
-        summary.detected,
         summary.unreadable,
         summary.with_scale,
         match summary.metadata_warnings {
@@ -172,28 +200,58 @@ fn load_config(
     }
 }
 
-/// The files a replay reads besides the frames, which its outputs must spare.
+/// The files a replay reads besides the frames, which its outputs must spare, and the
+/// CSVs it writes.
 pub struct Inputs<'a> {
     pub config: &'a Path,
-    /// The configuration's reference image.
-    pub reference: Option<&'a Path>,
+    /// The probes' reference images.
+    pub references: Vec<&'a Path>,
+    /// The results CSV of each probe, with its name (see [`csv_paths`]).
+    pub csvs: Vec<(String, PathBuf)>,
 }
 
-/// Writes the results CSV of `frames` (overlays named `overlay_names`), tracking on
-/// `args.threads` threads with trackers from `tracker`.
+/// The results CSV of each probe: `csv` itself for one probe; for several, `csv` with
+/// the probe's name before its extension (`out.csv` -> `out.left.csv`).
+pub fn csv_paths(csv: &Path, names: &[&str]) -> Vec<(String, PathBuf)> {
+    if let [name] = names {
+        return vec![(name.to_string(), csv.to_path_buf())];
+    }
+    let stem = csv
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().to_string());
+    let ext = csv
+        .extension()
+        .map_or_else(|| "csv".to_string(), |e| e.to_string_lossy().to_string());
+    names
+        .iter()
+        .map(|name| {
+            (
+                name.to_string(),
+                csv.with_file_name(format!("{stem}.{name}.{ext}")),
+            )
+        })
+        .collect()
+}
+
+/// Writes each probe's results CSV of `frames` (overlays named `overlay_names`),
+/// tracking on `args.threads` threads with trackers from `probes`.
 fn write_results(
     args: &ReplayArgs,
+    inputs: &Inputs,
     frames: &Frames,
     overlay_names: &[String],
-    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+    probes: &(dyn Fn() -> anyhow::Result<ProbeSet> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let file =
-        File::create(&args.csv).with_context(|| format!("creating {}", args.csv.display()))?;
-    let mut csv = BufWriter::new(file);
-    writeln!(csv, "{}", results::header())?;
+    let mut csvs = Vec::with_capacity(inputs.csvs.len());
+    for (_, path) in &inputs.csvs {
+        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut csv = BufWriter::new(file);
+        writeln!(csv, "{}", results::header())?;
+        csvs.push(csv);
+    }
     let progress = progress_bar(frames.count());
     let job = Job {
         frames,
@@ -204,14 +262,21 @@ fn write_results(
     };
     let threads = args.threads.map_or_else(default_threads, usize::from);
     let done = |n: usize| progress.inc(n as u64);
-    let mut counts = replay_frames(&job, threads, tracker, &mut csv, &done)?;
+    let mut counts = replay_frames(&job, threads, probes, &mut csvs, &done)?;
     progress.finish_and_clear();
-    csv.flush()
-        .with_context(|| format!("writing {}", args.csv.display()))?;
+    for (csv, (_, path)) in csvs.iter_mut().zip(&inputs.csvs) {
+        csv.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     counts.times_ms.sort_by(f64::total_cmp);
     Ok(ReplaySummary {
         frames: counts.frames,
-        detected: counts.detected,
+        detected: inputs
+            .csvs
+            .iter()
+            .map(|(name, _)| name.clone())
+            .zip(counts.detected.iter().copied().chain(std::iter::repeat(0)))
+            .collect(),
         unreadable: counts.unreadable,
         with_scale: counts.with_scale,
         metadata_warnings: counts.metadata_warnings,
@@ -228,11 +293,11 @@ pub fn default_threads() -> usize {
 pub fn replay(
     args: &ReplayArgs,
     inputs: &Inputs,
-    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+    probes: &(dyn Fn() -> anyhow::Result<ProbeSet> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
     let frames = list_frames(&args.frames_dir)?;
     let overlay_names = check_outputs(args, &frames, inputs)?;
-    write_results(args, &Frames::Files(frames), &overlay_names, tracker)
+    write_results(args, inputs, &Frames::Files(frames), &overlay_names, probes)
 }
 
 /// Replays a session recorded by `nanoforce run` (its `frames.nfrm`, in recorded order)
@@ -242,7 +307,7 @@ pub fn replay_session(
     args: &ReplayArgs,
     info: &SessionInfo,
     inputs: &Inputs,
-    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
+    probes: &(dyn Fn() -> anyhow::Result<ProbeSet> + Sync),
 ) -> anyhow::Result<ReplaySummary> {
     let session_json = args.frames_dir.join(SESSION_FILE);
     let Some(path) = info.frames_path(&args.frames_dir) else {
@@ -270,7 +335,7 @@ pub fn replay_session(
         frames: index.frames,
         anchor: info.anchor,
     };
-    write_results(args, &frames, &overlay_names, tracker)
+    write_results(args, inputs, &frames, &overlay_names, probes)
 }
 
 /// The overlay file name of `frame`: a PNG frame keeps its name (`x.png`), any other
@@ -302,16 +367,20 @@ fn check_outputs(
     }
     let config = format!("the configuration {}", files.config.display());
     inputs.insert(resolved(files.config), config);
-    if let Some(reference) = files.reference {
+    for reference in &files.references {
         let what = format!("the reference image {}", reference.display());
         inputs.insert(resolved(reference), what);
     }
-    let csv = resolved(&args.csv);
-    if let Some(input) = inputs.get(&csv) {
-        anyhow::bail!(
-            "--csv {} is {input}: refusing to overwrite an input",
-            args.csv.display()
-        );
+    let mut csvs: HashMap<PathBuf, &Path> = HashMap::new();
+    for (_, path) in &files.csvs {
+        let csv = resolved(path);
+        if let Some(input) = inputs.get(&csv) {
+            anyhow::bail!(
+                "--csv {} is {input}: refusing to overwrite an input",
+                path.display()
+            );
+        }
+        csvs.insert(csv, path);
     }
     let names: Vec<String> = frames.iter().map(|f| overlay_name(f)).collect();
     let Some(dir) = &args.overlay else {
@@ -342,11 +411,11 @@ fn check_outputs(
                 frame.display()
             );
         }
-        if out == csv {
+        if let Some(csv) = csvs.get(&out) {
             anyhow::bail!(
                 "the overlay of {} would overwrite the --csv file {}",
                 frame.display(),
-                args.csv.display()
+                csv.display()
             );
         }
     }

@@ -1,9 +1,11 @@
 //! `replay` on every core. The frames are cut into chunks of [`CHUNK_FRAMES`]; each chunk
-//! is tracked in order by one thread, with its own tracker, after a reset and
+//! is tracked in order by one thread, with its own trackers (one per probe), after a
+//! reset and
 //! [`WARMUP_FRAMES`] frames of the previous chunk tracked again without output (the
 //! coherence state is the last estimate, so the warm-up rebuilds it). The chunks are the
-//! same whatever the number of threads, so the CSV is byte-identical for `--threads 1`
-//! and `--threads N`; the rows are written in frame order as the chunks finish.
+//! same whatever the number of threads, so the CSVs are byte-identical for `--threads 1`
+//! and `--threads N`; the rows are written in frame order as the chunks finish, each
+//! probe's into its own CSV.
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::Write;
@@ -21,7 +23,7 @@ use crate::session::frames::load_gray;
 use crate::session::metadata::{read_sem_metadata, SemMetadata};
 use crate::session::results::{self, FrameLabel, RowExtras};
 use crate::session::utc::UtcAnchor;
-use crate::vision::{draw_overlay, Tracker};
+use crate::vision::{draw_overlays, Estimate, ProbeSet};
 
 /// Frames per chunk: long enough that the warm-up costs little (4 of 120, 3.3 %),
 /// short enough that the threads end together (a minute at 20 frames per second is
@@ -67,7 +69,8 @@ pub struct Job<'a> {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Counts {
     pub frames: usize,
-    pub detected: usize,
+    /// Per probe, in configuration order.
+    pub detected: Vec<usize>,
     pub unreadable: usize,
     pub with_scale: usize,
     pub metadata_warnings: usize,
@@ -77,7 +80,11 @@ pub struct Counts {
 impl Counts {
     fn add(&mut self, other: Counts) {
         self.frames += other.frames;
-        self.detected += other.detected;
+        self.detected
+            .resize(other.detected.len().max(self.detected.len()), 0);
+        for (sum, n) in self.detected.iter_mut().zip(other.detected) {
+            *sum += n;
+        }
         self.unreadable += other.unreadable;
         self.with_scale += other.with_scale;
         self.metadata_warnings += other.metadata_warnings;
@@ -85,20 +92,20 @@ impl Counts {
     }
 }
 
-/// A tracked chunk: its CSV rows and counts.
+/// A tracked chunk: its CSV rows (per probe) and counts.
 struct Chunk {
-    csv: Vec<u8>,
+    csv: Vec<Vec<u8>>,
     counts: Counts,
 }
 
-/// Tracks every frame of `job` on `threads` threads (each with a tracker from
-/// `tracker`), writing the rows in frame order into `out`; `done` is called with the
-/// number of frames of each chunk written.
-pub fn replay_frames(
+/// Tracks every frame of `job` on `threads` threads (each with the trackers `probes`
+/// makes), writing each probe's rows in frame order into its `out` (one per probe);
+/// `done` is called with the number of frames of each chunk written.
+pub fn replay_frames<W: Write>(
     job: &Job,
     threads: usize,
-    tracker: &(dyn Fn() -> anyhow::Result<Tracker> + Sync),
-    out: &mut impl Write,
+    probes: &(dyn Fn() -> anyhow::Result<ProbeSet> + Sync),
+    out: &mut [W],
     done: &(dyn Fn(usize) + Sync),
 ) -> anyhow::Result<Counts> {
     let chunks = job.frames.count().div_ceil(CHUNK_FRAMES);
@@ -111,7 +118,7 @@ pub fn replay_frames(
             let tx = tx.clone();
             let (next, failed, warned) = (&next, &failed, &warned);
             scope.spawn(move || {
-                let mut tracker = match tracker() {
+                let mut tracker = match probes() {
                     Ok(t) => t,
                     Err(e) => {
                         failed.store(true, Ordering::Relaxed);
@@ -142,7 +149,9 @@ pub fn replay_frames(
         for (index, chunk) in rx {
             waiting.insert(index, chunk?);
             while let Some(chunk) = waiting.remove(&written) {
-                out.write_all(&chunk.csv)?;
+                for (out, rows) in out.iter_mut().zip(&chunk.csv) {
+                    out.write_all(rows)?;
+                }
                 done(chunk.counts.frames);
                 counts.add(chunk.counts);
                 written += 1;
@@ -154,7 +163,7 @@ pub fn replay_frames(
 
 /// Tracks chunk `index`: a reset, the warm-up frames (no output), then its frames.
 fn track_chunk(
-    tracker: &mut Tracker,
+    tracker: &mut ProbeSet,
     job: &Job,
     index: usize,
     warned: &AtomicUsize,
@@ -173,10 +182,15 @@ fn track_chunk(
         Frames::Files(_) => None,
     };
     tracker.reset();
+    let probes = tracker.len();
     let mut chunk = Chunk {
-        csv: Vec::new(),
-        counts: Counts::default(),
+        csv: vec![Vec::new(); probes],
+        counts: Counts {
+            detected: vec![0; probes],
+            ..Counts::default()
+        },
     };
+    let mut estimates = vec![Estimate::default(); probes];
     let mut image = GrayImage::new(0, 0);
     for i in from..end {
         let output = i >= start;
@@ -227,12 +241,14 @@ fn track_chunk(
                 tracing::warn!("{e}; recorded as not detected");
                 chunk.counts.frames += 1;
                 chunk.counts.unreadable += 1;
-                results::write_unreadable(&mut chunk.csv, &label)?;
+                for csv in &mut chunk.csv {
+                    results::write_unreadable(csv, &label)?;
+                }
             }
             continue;
         }
         let started = Instant::now();
-        let estimate = tracker.track(&image);
+        tracker.track(&image, &mut estimates);
         let ms = started.elapsed().as_secs_f64() * 1e3;
         if !output {
             continue;
@@ -242,17 +258,20 @@ fn track_chunk(
             None => SemMetadata::default(),
         };
         chunk.counts.frames += 1;
-        chunk.counts.detected += usize::from(estimate.detected);
         chunk.counts.times_ms.push(ms);
-        let written = estimate.with_pixel_origin(tracker.pixel_origin());
         let extras = RowExtras {
             processing_ms: job.timing.then_some(ms),
             ..RowExtras::default()
         };
-        results::write_row(&mut chunk.csv, &label, &written, &sem, &extras)?;
+        for (p, estimate) in estimates.iter().enumerate() {
+            chunk.counts.detected[p] += usize::from(estimate.detected);
+            let origin = tracker.trackers()[p].pixel_origin();
+            let written = estimate.with_pixel_origin(origin);
+            results::write_row(&mut chunk.csv[p], &label, &written, &sem, &extras)?;
+        }
         if let Some(dir) = job.overlay {
             let out = dir.join(&job.overlay_names[i]);
-            draw_overlay(&image, &estimate)
+            draw_overlays(&image, &estimates)
                 .save(&out)
                 .with_context(|| format!("writing {}", out.display()))?;
         }

@@ -167,7 +167,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         stop_when_frames_end: false,
         clock,
         monitor: Some(config.monitor.clone()),
-        pixel_origin: config.tracker.pixel_origin,
+        pixel_origin: config.probes[0].tracker.pixel_origin,
         recordings_budget: budget,
         recording_error,
         stream: config.stream.clone(),
@@ -307,8 +307,23 @@ fn restart_sections(running: &Config, new: &Config) -> Vec<&'static str> {
             changed.push(name);
         }
     };
-    check("cantilever", running.cantilever == new.cantilever);
-    check("tracker", running.tracker == new.tracker);
+    let (was, now) = (&running.probes, &new.probes);
+    check(
+        "probe",
+        was.iter().map(|p| &p.name).eq(now.iter().map(|p| &p.name)),
+    );
+    check(
+        "cantilever",
+        was.iter()
+            .map(|p| p.cantilever)
+            .eq(now.iter().map(|p| p.cantilever)),
+    );
+    check(
+        "tracker",
+        was.iter()
+            .map(|p| &p.tracker)
+            .eq(now.iter().map(|p| &p.tracker)),
+    );
     check("frames", running.devices.frames == new.devices.frames);
     check("daq", running.devices.daq == new.devices.daq);
     check("haptic", running.devices.haptic == new.devices.haptic);

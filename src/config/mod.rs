@@ -13,19 +13,21 @@ use serde::Deserialize;
 
 pub mod daemon;
 pub mod monitor;
+pub mod probe;
 pub mod stream;
 
 use self::daemon::RawDaemon;
 pub use self::daemon::{DaemonConfig, LoopOptions};
 pub use self::monitor::MonitorConfig;
 use self::monitor::RawMonitor;
+pub use self::probe::{ProbeConfig, MAX_PROBES, SINGLE_NAME, WINDOW_DEG};
+use self::probe::{RawCantilever, RawProbe, RawTracker};
 use self::stream::RawStream;
 pub use self::stream::StreamConfig;
 pub(crate) use crate::checks::Checker;
 pub use crate::checks::{ConfigError, Number, Range, Zero};
 use crate::control::{RawSafety, RawTeleop, TeleopGains};
 use crate::hw::config::{DevicesConfig, RawDevice};
-use crate::model::Cantilever;
 use crate::sim::config::{RawSim, SimConfig};
 pub use crate::vision::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
@@ -36,10 +38,9 @@ pub use crate::vision::{
 pub struct Config {
     /// The file it was read from (used in messages and to resolve relative paths).
     pub path: PathBuf,
-    /// None: a probe without a force model (a tungsten needle, a gripper jaw), tracked
-    /// for its pose only: its estimates carry no force, and `run` refuses it.
-    pub cantilever: Option<Cantilever>,
-    pub tracker: TrackerConfig,
+    /// The probes in view, at least one: the top-level `[cantilever]` and `[tracker]`
+    /// (one probe, named `probe`) or the `[[probe]]` entries, in file order.
+    pub probes: Vec<ProbeConfig>,
     /// `[teleop]` and `[safety]`: the gains SIGHUP may reload.
     pub teleop: TeleopGains,
     /// `[frames]`, `[daq]`, `[haptic]`: which backend drives each device.
@@ -53,28 +54,12 @@ pub struct Config {
     pub sim: SimConfig,
 }
 
-// The accepted ranges of `[cantilever]` and `[tracker]`, documented with the same words
-// in config/probe.example.toml. The cantilever's span what AFM cantilevers are made as:
-// from short high-frequency levers (10 um) to the longest soft ones (under 1 mm), from
-// the softest contact-mode levers (0.001 N/m) to diamond-like indentation ones (1000
-// N/m), of polymers (about 2 GPa) to diamond (about 1000 GPa).
-const LENGTH_UM: Range = Range::new(10.0, 1000.0, "um");
-const SPRING_CONSTANT_N_PER_M: Range = Range::new(0.001, 1000.0, "N/m");
-const YOUNGS_MODULUS_GPA: Range = Range::new(1.0, 1000.0, "GPa");
-const WIDTH_UM: Range = Range::new(1.0, 200.0, "um");
-const THICKNESS_UM: Range = Range::new(0.1, 20.0, "um");
-/// Wider than 45 degrees the search windows of neighbouring edges overlap; narrower than
-/// 1 degree no deflection fits in the window.
-pub const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
-const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
-/// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
-const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");
-
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     cantilever: Option<RawCantilever>,
     tracker: Option<RawTracker>,
+    probe: Option<Vec<RawProbe>>,
     teleop: Option<RawTeleop>,
     safety: Option<RawSafety>,
     frames: Option<RawDevice>,
@@ -84,37 +69,6 @@ struct RawConfig {
     monitor: Option<RawMonitor>,
     stream: Option<RawStream>,
     sim: Option<RawSim>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawCantilever {
-    length_um: Option<f64>,
-    spring_constant_n_per_m: Option<f64>,
-    youngs_modulus_gpa: Option<f64>,
-    width_um: Option<f64>,
-    thickness_um: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawTracker {
-    threshold: Option<toml::Value>,
-    window_deg: Option<f64>,
-    pixel_origin: Option<String>,
-    edge_bias_px: Option<f64>,
-    calibration: Option<RawCalibration>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawCalibration {
-    reference_image: String,
-    /// Each click `[x, y]`; read as a list so that a third coordinate is refused
-    /// rather than silently dropped.
-    red: Vec<Vec<f64>>,
-    blue: Vec<Vec<f64>>,
-    green: Vec<Vec<f64>>,
 }
 
 impl Config {
@@ -134,20 +88,13 @@ impl Config {
             message: err.to_string().trim_end().to_string(),
         })?;
         let check = Checker { file: path };
-        let cantilever = raw
-            .cantilever
-            .map(|raw| check.cantilever(raw))
-            .transpose()?;
-        let tracker = match raw.tracker {
-            Some(raw) => check.tracker(raw)?,
-            None => TrackerConfig::default(),
-        };
+        let probes = probe::probes(&check, raw.cantilever, raw.tracker, raw.probe)?;
         let mut teleop = TeleopGains::validate(
             raw.teleop.unwrap_or_default(),
             raw.safety.unwrap_or_default(),
             &check,
         )?;
-        if let Some(cantilever) = cantilever {
+        if let Some(cantilever) = probes[0].cantilever {
             teleop.cantilever = cantilever;
         }
         let devices = DevicesConfig::validate(
@@ -162,8 +109,7 @@ impl Config {
         let sim = SimConfig::validate(raw.sim.unwrap_or_default(), &check)?;
         Ok(Config {
             path: path.to_path_buf(),
-            cantilever,
-            tracker,
+            probes,
             teleop,
             devices,
             daemon,
@@ -171,180 +117,6 @@ impl Config {
             stream,
             sim,
         })
-    }
-}
-
-impl Checker<'_> {
-    fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
-        let length_um = match raw.length_um {
-            Some(v) => self.number("cantilever.length_um", v, LENGTH_UM)?,
-            None => return Err(self.inconsistent("missing cantilever.length_um".into())),
-        };
-        let section = [raw.youngs_modulus_gpa, raw.width_um, raw.thickness_um];
-        let any_section = section.iter().any(Option::is_some);
-        let flexural_rigidity_n_m2 = match (raw.spring_constant_n_per_m, any_section) {
-            (Some(_), true) => {
-                return Err(self.inconsistent(
-                    "cantilever: give either spring_constant_n_per_m or \
-                     youngs_modulus_gpa + width_um + thickness_um, not both"
-                        .into(),
-                ))
-            }
-            (None, false) => {
-                return Err(self.inconsistent(
-                    "cantilever: missing stiffness: give spring_constant_n_per_m, or \
-                     youngs_modulus_gpa + width_um + thickness_um"
-                        .into(),
-                ))
-            }
-            (Some(k), false) => {
-                let k = self.number(
-                    "cantilever.spring_constant_n_per_m",
-                    k,
-                    SPRING_CONSTANT_N_PER_M,
-                )?;
-                Cantilever::rigidity_from_spring_constant(k, length_um)
-            }
-            (None, true) => {
-                let keys = [
-                    ("cantilever.youngs_modulus_gpa", YOUNGS_MODULUS_GPA),
-                    ("cantilever.width_um", WIDTH_UM),
-                    ("cantilever.thickness_um", THICKNESS_UM),
-                ];
-                let mut values = [0.0; 3];
-                for ((slot, value), (name, range)) in values.iter_mut().zip(section).zip(keys) {
-                    *slot = match value {
-                        Some(v) => self.number(name, v, range)?,
-                        None => {
-                            return Err(self.inconsistent(format!(
-                                "missing {name} (the cross-section needs youngs_modulus_gpa, \
-                                 width_um and thickness_um)"
-                            )))
-                        }
-                    };
-                }
-                Cantilever::rigidity_from_section(values[0], values[1], values[2])
-            }
-        };
-        Ok(Cantilever::new(length_um, flexural_rigidity_n_m2))
-    }
-
-    fn tracker(&self, raw: RawTracker) -> Result<TrackerConfig, ConfigError> {
-        let threshold = match raw.threshold {
-            None => Threshold::Otsu,
-            Some(toml::Value::String(s)) if s.eq_ignore_ascii_case("otsu") => Threshold::Otsu,
-            Some(toml::Value::Integer(level)) => match u8::try_from(level) {
-                Ok(level) => Threshold::Level(level),
-                Err(_) => {
-                    return Err(self.invalid(
-                        "tracker.threshold",
-                        level,
-                        "must be a grey level 0..=255 or \"otsu\"",
-                    ))
-                }
-            },
-            Some(other) => {
-                return Err(self.invalid(
-                    "tracker.threshold",
-                    other,
-                    "must be a grey level 0..=255 or \"otsu\"",
-                ))
-            }
-        };
-        let window_deg = self.number_or(
-            "tracker.window_deg",
-            raw.window_deg,
-            DEFAULT_WINDOW_DEG,
-            WINDOW_DEG,
-        )?;
-        let pixel_origin = match raw.pixel_origin {
-            None => PixelOrigin::Centre,
-            Some(text) => PixelOrigin::parse(&text).ok_or_else(|| {
-                self.invalid(
-                    "tracker.pixel_origin",
-                    format_args!("{text:?}"),
-                    "must be \"centre\" (the default: the top-left pixel's centre is 0, 0) or \
-                     \"corner\" (its top-left corner is)",
-                )
-            })?,
-        };
-        let edge_bias_px =
-            self.number_or("tracker.edge_bias_px", raw.edge_bias_px, 0.0, EDGE_BIAS_PX)?;
-        let calibration = raw
-            .calibration
-            .map(|c| self.calibration(c, pixel_origin))
-            .transpose()?;
-        Ok(TrackerConfig {
-            threshold,
-            window_deg,
-            pixel_origin,
-            edge_bias_px,
-            calibration,
-        })
-    }
-
-    fn calibration(
-        &self,
-        raw: RawCalibration,
-        origin: PixelOrigin,
-    ) -> Result<CalibrationConfig, ConfigError> {
-        if raw.reference_image.trim().is_empty() {
-            return Err(self.invalid(
-                "tracker.calibration.reference_image",
-                "\"\"",
-                "must name an image file",
-            ));
-        }
-        let red = self.clicks("red", raw.red)?;
-        let blue = self.clicks("blue", raw.blue)?;
-        let green = self.clicks("green", raw.green)?;
-        let base = self.file.parent().unwrap_or(Path::new(""));
-        Ok(CalibrationConfig {
-            reference_image: base.join(raw.reference_image),
-            red,
-            blue,
-            green,
-        }
-        .counted_from(origin))
-    }
-
-    /// The clicks on one edge: two or more pixels `[x, y]`, at least 2 px apart.
-    fn clicks(&self, name: &str, raw: Vec<Vec<f64>>) -> Result<Vec<[f64; 2]>, ConfigError> {
-        let key = format!("tracker.calibration.{name}");
-        if raw.len() < 2 {
-            return Err(self.invalid(
-                &key,
-                format_args!("{} point(s)", raw.len()),
-                "needs at least two clicked pixels",
-            ));
-        }
-        let mut points = Vec::with_capacity(raw.len());
-        for (i, p) in raw.iter().enumerate() {
-            let key = format!("{key}[{i}]");
-            let &[x, y] = p.as_slice() else {
-                return Err(self.invalid(
-                    &key,
-                    format_args!("{p:?}"),
-                    "must be one pixel [x, y] (two numbers)",
-                ));
-            };
-            points.push([
-                self.number(&format!("{key}[0]"), x, CLICK_PX)?,
-                self.number(&format!("{key}[1]"), y, CLICK_PX)?,
-            ]);
-        }
-        let spread = points
-            .iter()
-            .map(|p| (p[0] - points[0][0]).hypot(p[1] - points[0][1]))
-            .fold(0.0, f64::max);
-        if spread < 2.0 {
-            return Err(self.invalid(
-                &key,
-                format_args!("{points:?}"),
-                "needs points at least 2 px apart to define a direction",
-            ));
-        }
-        Ok(points)
     }
 }
 
@@ -394,12 +166,12 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     #[test]
     fn sample_config_parses() {
         let cfg = Config::from_toml_str(SAMPLE, Path::new("/data/s/probe.toml")).unwrap();
-        let cantilever = cfg.cantilever.unwrap();
+        let cantilever = cfg.probes[0].cantilever.unwrap();
         assert_eq!(cantilever.length_um, 434.675);
         let ei = 0.06 * (434.675e-6f64).powi(3) / 3.0;
         assert!((cantilever.flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
-        assert_eq!(cfg.tracker.threshold, Threshold::Otsu);
-        let cal = cfg.tracker.calibration.unwrap();
+        assert_eq!(cfg.probes[0].tracker.threshold, Threshold::Otsu);
+        let cal = cfg.probes[0].tracker.calibration.clone().unwrap();
         assert_eq!(cal.reference_image, Path::new("/data/s/reference.png"));
         assert_eq!(cal.green.len(), 3);
     }
@@ -410,8 +182,8 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
             "[cantilever]\nlength_um = 383\nspring_constant_n_per_m = 40\n[tracker]\nthreshold = 146\n",
         )
         .unwrap();
-        assert_eq!(cfg.tracker.threshold, Threshold::Level(146));
-        assert_eq!(cfg.tracker.window_deg, DEFAULT_WINDOW_DEG);
+        assert_eq!(cfg.probes[0].tracker.threshold, Threshold::Level(146));
+        assert_eq!(cfg.probes[0].tracker.window_deg, DEFAULT_WINDOW_DEG);
     }
 
     #[test]
@@ -421,7 +193,9 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         )
         .unwrap();
         let ei = 169e9 * 50e-6 * (2e-6f64).powi(3) / 12.0;
-        assert!((cfg.cantilever.unwrap().flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14);
+        assert!(
+            (cfg.probes[0].cantilever.unwrap().flexural_rigidity_n_m2 / ei - 1.0).abs() < 1e-14
+        );
     }
 
     fn error_of(text: &str) -> String {
@@ -431,17 +205,17 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     #[test]
     fn pixel_origin_and_edge_bias() {
         let cfg = parse(SAMPLE).unwrap();
-        assert_eq!(cfg.tracker.pixel_origin, PixelOrigin::Centre);
-        assert_eq!(cfg.tracker.edge_bias_px, 0.0);
+        assert_eq!(cfg.probes[0].tracker.pixel_origin, PixelOrigin::Centre);
+        assert_eq!(cfg.probes[0].tracker.edge_bias_px, 0.0);
         let text = SAMPLE.replace(
             "window_deg = 20.0\n",
             "window_deg = 20.0\npixel_origin = \"Corner\"\nedge_bias_px = 0.3\n",
         );
         let cfg = parse(&text).unwrap();
-        assert_eq!(cfg.tracker.pixel_origin, PixelOrigin::Corner);
-        assert_eq!(cfg.tracker.edge_bias_px, 0.3);
+        assert_eq!(cfg.probes[0].tracker.pixel_origin, PixelOrigin::Corner);
+        assert_eq!(cfg.probes[0].tracker.edge_bias_px, 0.3);
         // Clicks counted from the corner are kept counted from the pixel centre.
-        let cal = cfg.tracker.calibration.unwrap();
+        let cal = cfg.probes[0].tracker.calibration.clone().unwrap();
         assert_eq!(cal.red[0], [156.3, 32.9]);
         assert_eq!(cal.green[2], [314.3, 142.4]);
         assert_eq!(PixelOrigin::Corner.output([1.0, 2.0]), [1.5, 2.5]);
@@ -629,10 +403,83 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     #[test]
     fn a_probe_without_a_cantilever_has_no_force_model() {
         let cfg = parse("[tracker]\nthreshold = 100\n").unwrap();
-        assert_eq!(cfg.cantilever, None);
+        assert_eq!(cfg.probes[0].cantilever, None);
         // A half-given [cantilever] is still an error.
         let msg = error_of("[cantilever]\nwidth_um = 50\n");
         assert!(msg.contains("missing cantilever.length_um"), "{msg}");
+    }
+
+    const TWO: &str = r#"
+[[probe]]
+name = "left"
+[probe.cantilever]
+length_um = 400
+spring_constant_n_per_m = 1
+[probe.tracker]
+threshold = 120
+[[probe]]
+name = "needle"
+[probe.tracker]
+window_deg = 10
+"#;
+
+    #[test]
+    fn several_probes_are_named_entries() {
+        let cfg = parse(TWO).unwrap();
+        let names: Vec<&str> = cfg.probes.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["left", "needle"]);
+        assert_eq!(cfg.probes[0].tracker.threshold, Threshold::Level(120));
+        assert!(cfg.probes[0].cantilever.is_some() && cfg.probes[1].cantilever.is_none());
+        assert_eq!(cfg.probes[1].tracker.window_deg, 10.0);
+        // The first probe's cantilever is the one the haptic loop's gate knows.
+        assert_eq!(cfg.teleop.cantilever, cfg.probes[0].cantilever.unwrap());
+        // A file of one probe names it `probe`.
+        assert_eq!(parse(SAMPLE).unwrap().probes[0].name, SINGLE_NAME);
+    }
+
+    #[test]
+    fn probe_entries_are_checked_with_their_index() {
+        let msg = error_of(&TWO.replace("window_deg = 10", "window_deg = 90"));
+        assert!(
+            msg.contains("probe[1].tracker.window_deg = 90 is out of range"),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace("length_um = 400", "length_um = -4"));
+        assert!(msg.contains("probe[0].cantilever.length_um = -4"), "{msg}");
+        let msg = error_of(&TWO.replace("name = \"needle\"", "name = \"left\""));
+        assert!(
+            msg.ends_with(
+                "probe[1].name must differ from every earlier probe's name, got \"left\""
+            ),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace("name = \"needle\"", "name = \"a b\""));
+        assert!(
+            msg.contains("probe[1].name must be 1 to 32 letters"),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace("name = \"needle\"\n", ""));
+        assert!(msg.contains("missing probe[1].name"), "{msg}");
+        let msg = error_of(&format!("{TWO}[probe.tracker.calibration]\nreference_image = \"r.png\"\nred = [[1.0, 1.0]]\nblue = [[0.0, 0.0], [9.0, 9.0]]\ngreen = [[0.0, 0.0], [9.0, 9.0]]\n"));
+        assert!(msg.contains("probe[1].tracker.calibration.red"), "{msg}");
+        let five = TWO
+            .repeat(3)
+            .replace("\"left\"\n[probe.c", "\"x\"\n[probe.c");
+        assert!(
+            error_of(&five).contains("1 to 4 [[probe]] entries"),
+            "{}",
+            error_of(&five)
+        );
+    }
+
+    #[test]
+    fn one_probe_or_entries_not_both() {
+        let msg = error_of(&format!("[tracker]\nthreshold = 100\n{TWO}"));
+        assert!(msg.contains("not both"), "{msg}");
+        let msg = error_of(&format!(
+            "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n{TWO}"
+        ));
+        assert!(msg.contains("not both"), "{msg}");
     }
 
     #[test]

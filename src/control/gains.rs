@@ -411,7 +411,7 @@ mod tests {
     fn defaults_are_valid_and_documented_values() {
         let cfg = Config::from_toml_str(CANTILEVER, Path::new("lab.toml")).unwrap();
         let defaults = super::TeleopGains {
-            cantilever: cfg.cantilever.unwrap(),
+            cantilever: cfg.probes[0].cantilever.unwrap(),
             ..super::TeleopGains::default()
         };
         assert_eq!(cfg.teleop, defaults);

@@ -6,7 +6,7 @@ use anyhow::Context;
 use image::GrayImage;
 
 use super::{Devices, Estimator};
-use crate::config::{CalibrationConfig, Config};
+use crate::config::{CalibrationConfig, Config, ProbeConfig, SINGLE_NAME};
 use crate::hw::config::FramesBackend;
 use crate::hw::daq::RateOutput;
 use crate::hw::frames::FrameSource;
@@ -34,13 +34,14 @@ impl Estimator for VisionEstimator {
 /// compiled in is found before any device is touched, and a device opened before a
 /// later one failed is closed again (its outputs at zero).
 pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
-    force_model(config)?;
+    let probe = single_probe(config)?;
+    force_model(config, probe)?;
     let devices = &config.devices;
     hw_open::check_compiled(devices)?;
     // Real frames need the configured calibration: checked before touching a device.
     let mut configured_tracker = match devices.frames {
         FramesBackend::Sim => None,
-        _ => Some(tracker_from_config(config)?),
+        _ => Some(tracker_from_config(config, probe)?),
     };
     let (stage, snapshots): (Box<dyn RateOutput>, _) =
         match hw_open::daq(&devices.daq).context("opening the DAQ ([daq])")? {
@@ -59,8 +60,8 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
                 None => anyhow::bail!("no tracker for the configured frames"),
             },
             None => {
-                let scene = sim_scene(config)?;
-                let tracker = sim_tracker(config, &scene)?;
+                let scene = sim_scene(config, probe)?;
+                let tracker = sim_tracker(probe, &scene)?;
                 // Without the simulated stage the simulated probe hangs free.
                 (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
             }
@@ -87,10 +88,24 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
     })
 }
 
+/// The one probe a run tracks and feels: a configuration with several `[[probe]]`
+/// entries is refused with the reason.
+pub fn single_probe(config: &Config) -> anyhow::Result<&ProbeConfig> {
+    match config.probes.as_slice() {
+        [probe] => Ok(probe),
+        probes => anyhow::bail!(
+            "{}: {} [[probe]] entries: `nanoforce run` tracks and feels one probe; `nanoforce \
+             replay` tracks several in one view (one results file per probe)",
+            config.path.display(),
+            probes.len()
+        ),
+    }
+}
+
 /// The cantilever that turns the tip's bending into a force: a run renders that force,
 /// so a probe without `[cantilever]` is refused with the reason.
-fn force_model(config: &Config) -> anyhow::Result<Cantilever> {
-    config.cantilever.ok_or_else(|| {
+fn force_model(config: &Config, probe: &ProbeConfig) -> anyhow::Result<Cantilever> {
+    probe.cantilever.ok_or_else(|| {
         anyhow::anyhow!(
             "{}: no [cantilever] section: `nanoforce run` renders the probe's force, which \
              needs the cantilever (length_um and a stiffness, config/probe.example.toml). A \
@@ -102,67 +117,74 @@ fn force_model(config: &Config) -> anyhow::Result<Cantilever> {
 }
 
 /// The simulated SEM of `config`'s `[sim]` sections (it bends the configured cantilever).
-fn sim_scene(config: &Config) -> anyhow::Result<SemScene> {
+fn sim_scene(config: &Config, probe: &ProbeConfig) -> anyhow::Result<SemScene> {
     Ok(sim_lab::sem_scene(
         &config.sim,
-        force_model(config)?,
+        force_model(config, probe)?,
         &config.teleop,
     ))
 }
 
 /// The tracker calibrated on the simulated SEM's reference frame and clicks.
-fn sim_tracker(config: &Config, scene: &SemScene) -> anyhow::Result<Tracker> {
-    let (reference, clicks) = scene.reference(config.tracker.threshold, config.tracker.window_deg);
-    let calibration = calibrate(config, &reference, &clicks)?;
-    Ok(Tracker::new(
-        &config.tracker,
-        calibration,
-        config.cantilever,
-    ))
+fn sim_tracker(probe: &ProbeConfig, scene: &SemScene) -> anyhow::Result<Tracker> {
+    let (reference, clicks) = scene.reference(probe.tracker.threshold, probe.tracker.window_deg);
+    let calibration = calibrate(probe, &reference, &clicks)?;
+    Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
 }
 
 /// The tracker a live run of `config` uses: calibrated on the simulated SEM's reference
 /// with `[frames] backend = "sim"`, else on `[tracker.calibration]`. Replaying a
 /// recorded session with it tracks its frames as the run did.
 pub fn live_tracker(config: &Config) -> anyhow::Result<Tracker> {
+    let probe = single_probe(config)?;
     match config.devices.frames {
-        FramesBackend::Sim => sim_tracker(config, &sim_scene(config)?),
-        _ => tracker_from_config(config),
+        FramesBackend::Sim => sim_tracker(probe, &sim_scene(config, probe)?),
+        _ => tracker_from_config(config, probe),
     }
 }
 
-/// The tracker a configuration describes, calibrated on its `[tracker.calibration]`
+/// The trackers of every probe of `config`, in its order, each calibrated on its
+/// `[tracker.calibration]` (replaying frames from a real SEM).
+pub fn probe_trackers(config: &Config) -> anyhow::Result<Vec<Tracker>> {
+    config
+        .probes
+        .iter()
+        .map(|probe| tracker_from_config(config, probe))
+        .collect()
+}
+
+/// The tracker of one probe of `config`, calibrated on its `[tracker.calibration]`
 /// reference image (for recorded or live frames from a real SEM).
-pub fn tracker_from_config(config: &Config) -> anyhow::Result<Tracker> {
-    let Some(clicks) = &config.tracker.calibration else {
+pub fn tracker_from_config(config: &Config, probe: &ProbeConfig) -> anyhow::Result<Tracker> {
+    let section = match config.probes.iter().position(|p| p.name == probe.name) {
+        Some(i) if config.probes.len() > 1 => format!("probe[{i}].tracker.calibration"),
+        _ => "tracker.calibration".to_string(),
+    };
+    let Some(clicks) = &probe.tracker.calibration else {
         anyhow::bail!(
-            "{}: no [tracker.calibration] section: the tracker needs a reference image and \
-             clicked edge pixels (see `nanoforce calibrate --help`)",
+            "{}: no [{section}] section: the tracker needs a reference image and clicked \
+             edge pixels (see `nanoforce calibrate --help`)",
             config.path.display()
         );
     };
-    let reference = load_gray(&clicks.reference_image).with_context(|| {
-        format!(
-            "{}: tracker.calibration.reference_image",
-            config.path.display()
-        )
-    })?;
-    let calibration = calibrate(config, &reference, clicks)?;
-    Ok(Tracker::new(
-        &config.tracker,
-        calibration,
-        config.cantilever,
-    ))
+    let reference = load_gray(&clicks.reference_image)
+        .with_context(|| format!("{}: {section}.reference_image", config.path.display()))?;
+    let calibration = calibrate(probe, &reference, clicks)?;
+    Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
 }
 
 fn calibrate(
-    config: &Config,
+    probe: &ProbeConfig,
     reference: &GrayImage,
     clicks: &CalibrationConfig,
 ) -> anyhow::Result<Calibration> {
-    Calibration::from_reference(reference, clicks, &config.tracker).with_context(|| {
+    Calibration::from_reference(reference, clicks, &probe.tracker).with_context(|| {
         format!(
-            "calibrating the tracker on {}",
+            "calibrating the tracker{} on {}",
+            match probe.name.as_str() {
+                SINGLE_NAME => String::new(),
+                name => format!(" of probe {name}"),
+            },
             clicks.reference_image.display()
         )
     })

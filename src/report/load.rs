@@ -143,7 +143,7 @@ fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
 /// `tracker.pixel_origin`, or the pixel centre (the default) when the file is missing or
 /// does not load (the replay or run that wrote the CSV would have refused such a file).
 fn pixel_origin_of(config: &Path) -> PixelOrigin {
-    Config::load(config).map_or(PixelOrigin::Centre, |c| c.tracker.pixel_origin)
+    Config::load(config).map_or(PixelOrigin::Centre, |c| c.probes[0].tracker.pixel_origin)
 }
 
 /// A row of the estimate CSV as the report draws it, its pixels in the conventions' frame

@@ -69,7 +69,7 @@ pub fn sample(name: &str) -> Session {
         .join("tests/data/samples")
         .join(name);
     let config = Config::load(&dir.join("probe.toml")).unwrap();
-    let cal = config.tracker.calibration.as_ref().unwrap();
+    let cal = config.probes[0].tracker.calibration.as_ref().unwrap();
     let reference = image::open(&cal.reference_image).unwrap().to_luma8();
     let truth = read_truth(&dir.join("truth.csv"));
     Session {
@@ -82,8 +82,9 @@ pub fn sample(name: &str) -> Session {
 
 impl Session {
     pub fn calibrate(&self) -> Calibration {
-        let clicks = self.config.tracker.calibration.as_ref().unwrap();
-        Calibration::from_reference(&self.reference, clicks, &self.config.tracker).unwrap()
+        let clicks = self.config.probes[0].tracker.calibration.as_ref().unwrap();
+        Calibration::from_reference(&self.reference, clicks, &self.config.probes[0].tracker)
+            .unwrap()
     }
 
     pub fn frame(&self, name: &str) -> GrayImage {
@@ -94,12 +95,12 @@ impl Session {
 
     /// Tracks every frame in order; returns the estimates by truth row.
     pub fn run(&self, coherence: bool) -> Vec<Estimate> {
-        self.run_with(&self.config.tracker, coherence)
+        self.run_with(&self.config.probes[0].tracker, coherence)
     }
 
     /// As [`Session::run`], with other `[tracker]` settings (same calibration).
     pub fn run_with(&self, tracker: &TrackerConfig, coherence: bool) -> Vec<Estimate> {
-        let mut tracker = Tracker::new(tracker, self.calibrate(), self.config.cantilever);
+        let mut tracker = Tracker::new(tracker, self.calibrate(), self.config.probes[0].cantilever);
         tracker.set_coherence(coherence);
         self.truth
             .iter()

@@ -1,0 +1,397 @@
+//! One probe's sections: `[cantilever]` (its force model, optional) and `[tracker]` with
+//! its `[tracker.calibration]`. A lab file gives them once, at the top level, for one
+//! probe, or once per `[[probe]]` entry for several probes in one SEM view (each entry
+//! named, its keys then spelt `probe[i].cantilever.length_um` in messages).
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::checks::{Checker, ConfigError, Range};
+use crate::model::Cantilever;
+pub use crate::vision::MAX_PROBES;
+use crate::vision::{
+    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
+};
+
+// The accepted ranges of `[cantilever]` and `[tracker]`, documented with the same words
+// in config/probe.example.toml. The cantilever's span what AFM cantilevers are made as:
+// from short high-frequency levers (10 um) to the longest soft ones (under 1 mm), from
+// the softest contact-mode levers (0.001 N/m) to diamond-like indentation ones (1000
+// N/m), of polymers (about 2 GPa) to diamond (about 1000 GPa).
+const LENGTH_UM: Range = Range::new(10.0, 1000.0, "um");
+const SPRING_CONSTANT_N_PER_M: Range = Range::new(0.001, 1000.0, "N/m");
+const YOUNGS_MODULUS_GPA: Range = Range::new(1.0, 1000.0, "GPa");
+const WIDTH_UM: Range = Range::new(1.0, 200.0, "um");
+const THICKNESS_UM: Range = Range::new(0.1, 20.0, "um");
+/// Wider than 45 degrees the search windows of neighbouring edges overlap; narrower than
+/// 1 degree no deflection fits in the window.
+pub const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
+const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
+/// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
+const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");
+/// Longest probe name, characters (it names files: `out.<name>.csv`).
+const MAX_NAME_CHARS: usize = 32;
+
+/// One validated probe: what tracks it and, for a cantilever, what turns its bending
+/// into a force.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProbeConfig {
+    /// `[[probe]] name`; a single probe given at the top level is named [`SINGLE_NAME`].
+    pub name: String,
+    /// None: a probe without a force model (a tungsten needle, a gripper jaw), tracked
+    /// for its pose only: its estimates carry no force, and `run` refuses it.
+    pub cantilever: Option<Cantilever>,
+    pub tracker: TrackerConfig,
+}
+
+/// The name of the one probe a file gives at the top level (`[cantilever]`, `[tracker]`).
+pub const SINGLE_NAME: &str = "probe";
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawCantilever {
+    length_um: Option<f64>,
+    spring_constant_n_per_m: Option<f64>,
+    youngs_modulus_gpa: Option<f64>,
+    width_um: Option<f64>,
+    thickness_um: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawTracker {
+    threshold: Option<toml::Value>,
+    window_deg: Option<f64>,
+    pixel_origin: Option<String>,
+    edge_bias_px: Option<f64>,
+    calibration: Option<RawCalibration>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCalibration {
+    reference_image: String,
+    /// Each click `[x, y]`; read as a list so that a third coordinate is refused
+    /// rather than silently dropped.
+    red: Vec<Vec<f64>>,
+    blue: Vec<Vec<f64>>,
+    green: Vec<Vec<f64>>,
+}
+
+/// One `[[probe]]` entry.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawProbe {
+    name: Option<String>,
+    cantilever: Option<RawCantilever>,
+    tracker: Option<RawTracker>,
+}
+
+/// The probes of a file: its top-level `[cantilever]` and `[tracker]` (one probe) or
+/// its `[[probe]]` entries (one to [`MAX_PROBES`], each named, the names unique), not
+/// both.
+pub(super) fn probes(
+    check: &Checker,
+    cantilever: Option<RawCantilever>,
+    tracker: Option<RawTracker>,
+    entries: Option<Vec<RawProbe>>,
+) -> Result<Vec<ProbeConfig>, ConfigError> {
+    let Some(entries) = entries else {
+        let single = Section {
+            check,
+            prefix: String::new(),
+        };
+        return Ok(vec![single.probe(
+            SINGLE_NAME.to_string(),
+            cantilever,
+            tracker,
+        )?]);
+    };
+    if cantilever.is_some() || tracker.is_some() {
+        return Err(check.inconsistent(
+            "give one probe as [cantilever] and [tracker], or several as [[probe]] entries \
+             (each with its own cantilever and tracker), not both"
+                .into(),
+        ));
+    }
+    if entries.is_empty() || entries.len() > MAX_PROBES {
+        return Err(check.invalid(
+            "probe",
+            format_args!("{} entries", entries.len()),
+            &format!("needs 1 to {MAX_PROBES} [[probe]] entries (an S100 carries up to four positioners)"),
+        ));
+    }
+    let mut probes: Vec<ProbeConfig> = Vec::with_capacity(entries.len());
+    for (i, raw) in entries.into_iter().enumerate() {
+        let section = Section {
+            check,
+            prefix: format!("probe[{i}]."),
+        };
+        let name = section.name(raw.name)?;
+        if probes.iter().any(|p| p.name == name) {
+            return Err(check.invalid(
+                &section.key("name"),
+                format_args!("{name:?}"),
+                "must differ from every earlier probe's name",
+            ));
+        }
+        probes.push(section.probe(name, raw.cantilever, raw.tracker)?);
+    }
+    Ok(probes)
+}
+
+/// The sections of one probe, its keys spelt with `prefix`.
+struct Section<'a> {
+    check: &'a Checker<'a>,
+    prefix: String,
+}
+
+impl Section<'_> {
+    fn key(&self, key: &str) -> String {
+        format!("{}{key}", self.prefix)
+    }
+
+    fn number(&self, key: &str, value: f64, range: Range) -> Result<f64, ConfigError> {
+        self.check.number(&self.key(key), value, range)
+    }
+
+    fn number_or(
+        &self,
+        key: &str,
+        value: Option<f64>,
+        default: f64,
+        range: Range,
+    ) -> Result<f64, ConfigError> {
+        self.check.number_or(&self.key(key), value, default, range)
+    }
+
+    fn invalid(&self, key: &str, value: impl std::fmt::Display, reason: &str) -> ConfigError {
+        self.check.invalid(&self.key(key), value, reason)
+    }
+
+    fn inconsistent(&self, message: String) -> ConfigError {
+        self.check.inconsistent(message)
+    }
+
+    /// A probe's name: it names files (`out.<name>.csv`), so letters, digits, `-` and
+    /// `_`, at most [`MAX_NAME_CHARS`].
+    fn name(&self, raw: Option<String>) -> Result<String, ConfigError> {
+        let Some(name) = raw else {
+            return Err(self.inconsistent(format!(
+                "missing {} (each [[probe]] is named: it names its results file)",
+                self.key("name")
+            )));
+        };
+        let fits = !name.is_empty()
+            && name.chars().count() <= MAX_NAME_CHARS
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+        if !fits {
+            return Err(self.invalid(
+                "name",
+                format_args!("{name:?}"),
+                &format!(
+                    "must be 1 to {MAX_NAME_CHARS} letters, digits, '-' or '_' (it names \
+                     the probe's results file)"
+                ),
+            ));
+        }
+        Ok(name)
+    }
+
+    fn probe(
+        &self,
+        name: String,
+        cantilever: Option<RawCantilever>,
+        tracker: Option<RawTracker>,
+    ) -> Result<ProbeConfig, ConfigError> {
+        let cantilever = cantilever.map(|raw| self.cantilever(raw)).transpose()?;
+        let tracker = match tracker {
+            Some(raw) => self.tracker(raw)?,
+            None => TrackerConfig::default(),
+        };
+        Ok(ProbeConfig {
+            name,
+            cantilever,
+            tracker,
+        })
+    }
+    fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
+        let length_um = match raw.length_um {
+            Some(v) => self.number("cantilever.length_um", v, LENGTH_UM)?,
+            None => {
+                return Err(
+                    self.inconsistent(format!("missing {}", self.key("cantilever.length_um")))
+                )
+            }
+        };
+        let section = [raw.youngs_modulus_gpa, raw.width_um, raw.thickness_um];
+        let any_section = section.iter().any(Option::is_some);
+        let flexural_rigidity_n_m2 = match (raw.spring_constant_n_per_m, any_section) {
+            (Some(_), true) => {
+                return Err(self.inconsistent(format!(
+                    "{}: give either spring_constant_n_per_m or \
+                     youngs_modulus_gpa + width_um + thickness_um, not both",
+                    self.key("cantilever")
+                )))
+            }
+            (None, false) => {
+                return Err(self.inconsistent(format!(
+                    "{}: missing stiffness: give spring_constant_n_per_m, or \
+                     youngs_modulus_gpa + width_um + thickness_um",
+                    self.key("cantilever")
+                )))
+            }
+            (Some(k), false) => {
+                let k = self.number(
+                    "cantilever.spring_constant_n_per_m",
+                    k,
+                    SPRING_CONSTANT_N_PER_M,
+                )?;
+                Cantilever::rigidity_from_spring_constant(k, length_um)
+            }
+            (None, true) => {
+                let keys = [
+                    ("cantilever.youngs_modulus_gpa", YOUNGS_MODULUS_GPA),
+                    ("cantilever.width_um", WIDTH_UM),
+                    ("cantilever.thickness_um", THICKNESS_UM),
+                ];
+                let mut values = [0.0; 3];
+                for ((slot, value), (name, range)) in values.iter_mut().zip(section).zip(keys) {
+                    *slot = match value {
+                        Some(v) => self.number(name, v, range)?,
+                        None => {
+                            return Err(self.inconsistent(format!(
+                                "missing {} (the cross-section needs youngs_modulus_gpa, \
+                                 width_um and thickness_um)",
+                                self.key(name)
+                            )))
+                        }
+                    };
+                }
+                Cantilever::rigidity_from_section(values[0], values[1], values[2])
+            }
+        };
+        Ok(Cantilever::new(length_um, flexural_rigidity_n_m2))
+    }
+
+    fn tracker(&self, raw: RawTracker) -> Result<TrackerConfig, ConfigError> {
+        let threshold = match raw.threshold {
+            None => Threshold::Otsu,
+            Some(toml::Value::String(s)) if s.eq_ignore_ascii_case("otsu") => Threshold::Otsu,
+            Some(toml::Value::Integer(level)) => match u8::try_from(level) {
+                Ok(level) => Threshold::Level(level),
+                Err(_) => {
+                    return Err(self.invalid(
+                        "tracker.threshold",
+                        level,
+                        "must be a grey level 0..=255 or \"otsu\"",
+                    ))
+                }
+            },
+            Some(other) => {
+                return Err(self.invalid(
+                    "tracker.threshold",
+                    other,
+                    "must be a grey level 0..=255 or \"otsu\"",
+                ))
+            }
+        };
+        let window_deg = self.number_or(
+            "tracker.window_deg",
+            raw.window_deg,
+            DEFAULT_WINDOW_DEG,
+            WINDOW_DEG,
+        )?;
+        let pixel_origin = match raw.pixel_origin {
+            None => PixelOrigin::Centre,
+            Some(text) => PixelOrigin::parse(&text).ok_or_else(|| {
+                self.invalid(
+                    "tracker.pixel_origin",
+                    format_args!("{text:?}"),
+                    "must be \"centre\" (the default: the top-left pixel's centre is 0, 0) or \
+                     \"corner\" (its top-left corner is)",
+                )
+            })?,
+        };
+        let edge_bias_px =
+            self.number_or("tracker.edge_bias_px", raw.edge_bias_px, 0.0, EDGE_BIAS_PX)?;
+        let calibration = raw
+            .calibration
+            .map(|c| self.calibration(c, pixel_origin))
+            .transpose()?;
+        Ok(TrackerConfig {
+            threshold,
+            window_deg,
+            pixel_origin,
+            edge_bias_px,
+            calibration,
+        })
+    }
+
+    fn calibration(
+        &self,
+        raw: RawCalibration,
+        origin: PixelOrigin,
+    ) -> Result<CalibrationConfig, ConfigError> {
+        if raw.reference_image.trim().is_empty() {
+            return Err(self.invalid(
+                "tracker.calibration.reference_image",
+                "\"\"",
+                "must name an image file",
+            ));
+        }
+        let red = self.clicks("red", raw.red)?;
+        let blue = self.clicks("blue", raw.blue)?;
+        let green = self.clicks("green", raw.green)?;
+        let base = self.check.file.parent().unwrap_or(Path::new(""));
+        Ok(CalibrationConfig {
+            reference_image: base.join(raw.reference_image),
+            red,
+            blue,
+            green,
+        }
+        .counted_from(origin))
+    }
+
+    /// The clicks on one edge: two or more pixels `[x, y]`, at least 2 px apart.
+    fn clicks(&self, name: &str, raw: Vec<Vec<f64>>) -> Result<Vec<[f64; 2]>, ConfigError> {
+        let key = self.key(&format!("tracker.calibration.{name}"));
+        if raw.len() < 2 {
+            return Err(self.check.invalid(
+                &key,
+                format_args!("{} point(s)", raw.len()),
+                "needs at least two clicked pixels",
+            ));
+        }
+        let mut points = Vec::with_capacity(raw.len());
+        for (i, p) in raw.iter().enumerate() {
+            let key = format!("{key}[{i}]");
+            let &[x, y] = p.as_slice() else {
+                return Err(self.check.invalid(
+                    &key,
+                    format_args!("{p:?}"),
+                    "must be one pixel [x, y] (two numbers)",
+                ));
+            };
+            points.push([
+                self.check.number(&format!("{key}[0]"), x, CLICK_PX)?,
+                self.check.number(&format!("{key}[1]"), y, CLICK_PX)?,
+            ]);
+        }
+        let spread = points
+            .iter()
+            .map(|p| (p[0] - points[0][0]).hypot(p[1] - points[0][1]))
+            .fold(0.0, f64::max);
+        if spread < 2.0 {
+            return Err(self.check.invalid(
+                &key,
+                format_args!("{points:?}"),
+                "needs points at least 2 px apart to define a direction",
+            ));
+        }
+        Ok(points)
+    }
+}
