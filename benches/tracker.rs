@@ -13,7 +13,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use image::GrayImage;
-use nanoforce::config::{CalibrationConfig, Config, TrackerConfig};
+use nanoforce::config::{Config, TrackerConfig};
 use nanoforce::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
 use nanoforce::vision::{Calibration, Estimate, ProbeSet, Tracker};
 
@@ -27,17 +27,9 @@ fn tracker_for(width: u32, window_deg: f64) -> (Setup, Tracker) {
         base_deg: -18.0,
     };
     let session = Session::mixed_for(&setup, 11, 1);
-    let clicks = session.clicks();
     let cfg = TrackerConfig {
-        threshold: session.threshold,
         window_deg,
-        calibration: Some(CalibrationConfig {
-            reference_image: "reference.png".into(),
-            red: clicks.red,
-            blue: clicks.blue,
-            green: clicks.green,
-        }),
-        ..TrackerConfig::default()
+        ..session.tracker_config_of(0)
     };
     let (reference, _) = scene::render(&session.reference);
     let cal =

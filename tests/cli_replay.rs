@@ -26,6 +26,20 @@ fn replay(frames: &Path, config: &Path, csv: &Path, extra: &[&str]) -> std::proc
         .unwrap()
 }
 
+/// `nanoforce run` of `config` (state under `dir`), which must refuse it: its message.
+fn refused_run(dir: &Path, config: &Path) -> String {
+    let run = Command::new(BIN)
+        .args(["run", "--duration-s", "1", "--config"])
+        .arg(config)
+        .arg("--state-dir")
+        .arg(dir.join("state"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr).to_string();
+    assert!(!run.status.success(), "{err}");
+    err
+}
+
 /// A copy of a sample session's config and reference, with `n` frames in `frames/`.
 fn session_copy(name: &str, n: usize) -> (tempfile::TempDir, PathBuf, Vec<GrayImage>) {
     let dir = tempfile::tempdir().unwrap();
@@ -482,15 +496,7 @@ fn a_probe_without_a_cantilever_is_tracked_for_its_pose_only() {
             "{r:?}"
         );
     }
-    let run = Command::new(BIN)
-        .args(["run", "--duration-s", "1", "--config"])
-        .arg(&no_force)
-        .arg("--state-dir")
-        .arg(dir.path().join("state"))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success(), "{err}");
+    let err = refused_run(dir.path(), &no_force);
     assert!(
         err.contains("no [cantilever] section") && err.contains("can be calibrated and replayed"),
         "{err}"
@@ -534,15 +540,7 @@ fn several_probes_get_one_results_file_each() {
         assert!(score.angle_err_p95_deg < 0.15, "{name}: {score:?}");
     }
     assert_eq!(std::fs::read_dir(&overlays).unwrap().count(), 12);
-    let run = Command::new(BIN)
-        .args(["run", "--duration-s", "1", "--config"])
-        .arg(&config)
-        .arg("--state-dir")
-        .arg(dir.path().join("state"))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success(), "{err}");
+    let err = refused_run(dir.path(), &config);
     assert!(
         err.contains("2 [[probe]] entries") && err.contains("replay"),
         "{err}"

@@ -13,7 +13,7 @@ mod tracker_support;
 use image::GrayImage;
 use nanoforce::scene::{render_into, truth_of, Session};
 use nanoforce::vision::{Calibration, Estimate, Miss, ProbeSet, Tracker};
-use tracker_support::{score, Truth};
+use tracker_support::{rendered, score, Truth};
 
 fn seed(default: u64) -> u64 {
     std::env::var("PROBES_SEED")
@@ -53,15 +53,7 @@ fn run(session: &Session) -> Vec<(Vec<Truth>, Vec<Estimate>)> {
         set.track(&frame, &mut estimates);
         for (k, (truths, found)) in per_probe.iter_mut().enumerate() {
             let t = truth_of(&spec.nth_probe(k).expect("placed"));
-            truths.push(Truth {
-                frame: format!("frame_{i:05}"),
-                detected: t.probe_in_view,
-                angle_deg: t.angle_deg,
-                force_nn: t.force_nn,
-                tip: [t.tip_x, t.tip_y],
-                magnification: t.magnification,
-                style: spec.look.style_name.to_string(),
-            });
+            truths.push(rendered::truth(i, spec, &t));
             found.push(estimates[k]);
         }
     }

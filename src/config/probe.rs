@@ -156,16 +156,6 @@ impl Section<'_> {
         self.check.number(&self.key(key), value, range)
     }
 
-    fn number_or(
-        &self,
-        key: &str,
-        value: Option<f64>,
-        default: f64,
-        range: Range,
-    ) -> Result<f64, ConfigError> {
-        self.check.number_or(&self.key(key), value, default, range)
-    }
-
     fn invalid(&self, key: &str, value: impl std::fmt::Display, reason: &str) -> ConfigError {
         self.check.invalid(&self.key(key), value, reason)
     }
@@ -299,8 +289,8 @@ impl Section<'_> {
                 ))
             }
         };
-        let window_deg = self.number_or(
-            "tracker.window_deg",
+        let window_deg = self.check.number_or(
+            &self.key("tracker.window_deg"),
             raw.window_deg,
             DEFAULT_WINDOW_DEG,
             WINDOW_DEG,
@@ -316,8 +306,12 @@ impl Section<'_> {
                 )
             })?,
         };
-        let edge_bias_px =
-            self.number_or("tracker.edge_bias_px", raw.edge_bias_px, 0.0, EDGE_BIAS_PX)?;
+        let edge_bias_px = self.check.number_or(
+            &self.key("tracker.edge_bias_px"),
+            raw.edge_bias_px,
+            0.0,
+            EDGE_BIAS_PX,
+        )?;
         let calibration = raw
             .calibration
             .map(|c| self.calibration(c, pixel_origin))

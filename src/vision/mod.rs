@@ -24,7 +24,8 @@
 //! - `autocal`: the three edges found from one click on the apex (or none), for
 //!   calibration;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration;
-//! - `probes`: several probes in one view, each with its own tracker.
+//! - `probes`: several probes in one view, each with its own tracker; `claim`: the
+//!   body a detection claims of its frame.
 //!
 //! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
@@ -33,6 +34,7 @@ mod autocal;
 mod bands;
 mod calibration;
 mod candidates;
+mod claim;
 mod edges;
 mod geometry;
 mod hough;

@@ -327,7 +327,7 @@ pub mod rendered {
     }
 
     /// The truth of frame `k` of a session, rendered from `spec`.
-    fn truth(k: usize, spec: &FrameSpec, t: &nanoforce::scene::Truth) -> Truth {
+    pub fn truth(k: usize, spec: &FrameSpec, t: &nanoforce::scene::Truth) -> Truth {
         Truth {
             frame: format!("frame_{k:05}"),
             detected: t.probe_in_view,
