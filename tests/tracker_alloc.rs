@@ -12,8 +12,17 @@ mod alloc_counter;
 #[global_allocator]
 static GLOBAL: alloc_counter::Counting = alloc_counter::Counting;
 
+/// The count is one for the whole binary: its tests take turns, or one would count the
+/// other's allocations.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn turn() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 #[test]
 fn tracking_allocates_nothing_after_warm_up() {
+    let _turn = turn();
     alloc_counter::watch_this_thread();
     // One 640x480 and one 1280x960 session of the suite, frames rendered up front.
     let sessions = scene::suite(41, 3, 24);
@@ -56,6 +65,7 @@ fn tracking_allocates_nothing_after_warm_up() {
 
 #[test]
 fn tracking_several_probes_allocates_nothing_after_warm_up() {
+    let _turn = turn();
     alloc_counter::watch_this_thread();
     let session = scene::Session::several(41, 2, 24, 640, 480);
     let (reference, _) = scene::render(&session.reference);
