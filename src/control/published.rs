@@ -34,48 +34,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn only_a_measured_force_of_a_detection_is_felt() {
-        let found = Estimate {
-            detected: true,
-            angle_deg: Some(0.4),
-            force_nn: Some(120.0),
-            apex_px: Some([10.0, 20.0]),
-            confidence: 0.9,
-            ..Estimate::default()
-        };
-        assert_eq!(found.felt_force_nn(), Some(120.0));
-        for (why, e) in [
-            (
-                "not detected",
-                Estimate {
-                    detected: false,
-                    ..found
-                },
-            ),
-            (
-                "no force",
-                Estimate {
-                    force_nn: None,
-                    ..found
-                },
-            ),
-            (
-                "not finite",
-                Estimate {
-                    force_nn: Some(f64::NAN),
-                    ..found
-                },
-            ),
-            (
-                "clamped",
-                Estimate {
-                    force_saturated: true,
-                    ..found
-                },
-            ),
-        ] {
-            assert_eq!(e.felt_force_nn(), None, "{why}");
-        }
+    fn nothing_published_yet_is_felt_as_nothing() {
         assert_eq!(Published::default().estimate.felt_force_nn(), None);
     }
 }

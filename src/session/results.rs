@@ -22,6 +22,10 @@ use super::csv::Table;
 use super::metadata::SemMetadata;
 use crate::vision::{Edge, EdgeFit, Estimate, Miss};
 
+/// How many of the first [`COLUMNS`] truth.csv shares, the same names in the same order
+/// (`frame` to `tip_y`): `nanoforce score` pairs the two files by them.
+pub const SHARED_WITH_TRUTH: usize = 6;
+
 /// The columns of every estimate CSV nanoforce writes (a replay's results and a run's
 /// `estimates.csv`), in order; docs/operations.md says what each holds.
 pub const COLUMNS: [&str; 38] = [

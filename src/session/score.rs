@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::csv::Table;
-use super::results::{ResultRow, ResultsError};
+use super::results::{ResultRow, ResultsError, COLUMNS, SHARED_WITH_TRUTH};
 
 /// One row of a `truth.csv` (docs/conventions.md, "A recorded session on disk").
 #[derive(Debug, Clone, PartialEq)]
@@ -37,14 +37,7 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, ResultsError> {
     })?;
     let table = Table::parse(&text).map_err(format)?;
     let col = |name: &str| table.column(name);
-    let names = [
-        "frame",
-        "detected",
-        "angle_deg",
-        "force_nN",
-        "tip_x",
-        "tip_y",
-    ];
+    let names: [&str; SHARED_WITH_TRUTH] = std::array::from_fn(|i| COLUMNS[i]);
     let [Some(frame), Some(det), Some(angle), Some(force), Some(tx), Some(ty)] = names.map(col)
     else {
         return Err(format(format!("truth.csv needs the columns {names:?}")));
