@@ -130,7 +130,6 @@ fn bench_probes(c: &mut Criterion) {
     let mut group = c.benchmark_group("probes");
     for (count, width, height) in [(2usize, 640u32, 480u32), (4, 1024, 768)] {
         let session = Session::several(3, count, 40, width, height);
-        let (reference, _) = scene::render(&session.reference);
         let frames: Vec<GrayImage> = session
             .frames
             .iter()
@@ -141,17 +140,11 @@ fn bench_probes(c: &mut Criterion) {
         group.throughput(Throughput::Elements(frames.len() as u64));
         // The first probe alone on the same frames, then all of them.
         for n in [1, count] {
-            let trackers = (0..n)
-                .map(|k| {
-                    let cfg = session.tracker_config_of(k);
-                    let clicks = cfg.calibration.as_ref().expect("clicks");
-                    let cal = Calibration::from_reference(&reference, clicks, &cfg)
-                        .expect("the rendered reference calibrates");
-                    let mut tracker = Tracker::new(&cfg, cal, None);
-                    tracker.set_coherence(false);
-                    tracker
-                })
-                .collect();
+            let mut trackers = session
+                .trackers()
+                .expect("the rendered reference calibrates");
+            trackers.truncate(n);
+            trackers.iter_mut().for_each(|t| t.set_coherence(false));
             let mut set = ProbeSet::new(trackers, &vec![0; n]);
             let mut out = vec![Estimate::default(); n];
             let name = BenchmarkId::new(format!("{width}x{height}"), format!("{n}-of-{count}"));

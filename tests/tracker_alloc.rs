@@ -3,7 +3,7 @@
 //! without coherence.
 use image::GrayImage;
 use nanoforce::scene::{self, render_into};
-use nanoforce::vision::{Calibration, Estimate, ProbeSet, Tracker};
+use nanoforce::vision::{Estimate, ProbeSet, Tracker};
 
 mod tracker_support;
 
@@ -68,15 +68,9 @@ fn tracking_several_probes_allocates_nothing_after_warm_up() {
     let _turn = turn();
     alloc_counter::watch_this_thread();
     let session = scene::Session::several(41, 2, 24, 640, 480);
-    let (reference, _) = scene::render(&session.reference);
-    let trackers = (0..2)
-        .map(|k| {
-            let cfg = session.tracker_config_of(k);
-            let clicks = cfg.calibration.as_ref().expect("clicks");
-            let cal = Calibration::from_reference(&reference, clicks, &cfg).expect("calibrates");
-            Tracker::new(&cfg, cal, None)
-        })
-        .collect();
+    let trackers = session
+        .trackers()
+        .expect("the rendered reference calibrates");
     let mut set = ProbeSet::new(trackers, &[0, 0]);
     let frames: Vec<GrayImage> = session.frames.iter().map(|f| scene::render(f).0).collect();
     let mut out = vec![Estimate::default(); 2];

@@ -12,7 +12,7 @@ mod tracker_support;
 
 use image::GrayImage;
 use nanoforce::scene::{render_into, truth_of, Session};
-use nanoforce::vision::{Calibration, Estimate, Miss, ProbeSet, Tracker};
+use nanoforce::vision::{Estimate, Miss, ProbeSet, Tracker};
 use tracker_support::{rendered, score, Truth};
 
 fn seed(default: u64) -> u64 {
@@ -25,20 +25,11 @@ fn seed(default: u64) -> u64 {
 /// Every probe of `session` calibrated on its reference from its own clicks, without
 /// coherence (the frames are in random order).
 fn trackers(session: &Session) -> Vec<Tracker> {
-    let mut reference = GrayImage::new(1, 1);
-    render_into(&session.reference, &mut reference);
-    (0..session.reference.probe_count())
-        .map(|k| {
-            let cfg = session.tracker_config_of(k);
-            let clicks = cfg.calibration.as_ref().expect("given");
-            let cal = Calibration::from_reference(&reference, clicks, &cfg)
-                .unwrap_or_else(|e| panic!("probe {k} calibrates: {e}"));
-            let probe = session.reference.nth_probe(k).expect("placed").probe;
-            let mut tracker = Tracker::new(&cfg, cal, Some(probe.cantilever()));
-            tracker.set_coherence(false);
-            tracker
-        })
-        .collect()
+    let mut trackers = session
+        .trackers()
+        .expect("the rendered reference calibrates");
+    trackers.iter_mut().for_each(|t| t.set_coherence(false));
+    trackers
 }
 
 /// Renders and tracks every frame; per probe, its truth and estimates.

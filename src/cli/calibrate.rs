@@ -164,13 +164,7 @@ pub fn calibration_block(
     calibration: &Calibration,
     origin: PixelOrigin,
 ) -> String {
-    let points = |v: &[[f64; 2]]| {
-        let inner: Vec<String> = v
-            .iter()
-            .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
-            .collect();
-        format!("[{}]", inner.join(", "))
-    };
+    let points = CalibrationConfig::toml_points;
     let name = clicks.reference_image.file_name().map_or_else(
         || clicks.reference_image.display().to_string(),
         |n| n.to_string_lossy().to_string(),

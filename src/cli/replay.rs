@@ -117,14 +117,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let (config, config_path) = load_config(&args, session.as_ref())?;
     // The trackers once now, so a bad calibration is reported before anything is
     // written.
-    let references: Vec<_> = config
+    let references: Vec<Option<&Path>> = config
         .probes
         .iter()
         .map(|p| {
             p.tracker
                 .calibration
                 .as_ref()
-                .map(|c| c.reference_image.clone())
+                .map(|c| c.reference_image.as_path())
         })
         .collect();
     let probes = || match session {
@@ -135,12 +135,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let names: Vec<&str> = config.probes.iter().map(|p| p.name.as_str()).collect();
     let inputs = Inputs {
         config: &config_path,
-        references: config
-            .probes
-            .iter()
-            .filter_map(|p| p.tracker.calibration.as_ref())
-            .map(|c| c.reference_image.as_path())
-            .collect(),
+        references: references.iter().flatten().copied().collect(),
         csvs: csv_paths(&args.csv, &names),
     };
     let summary = match &session {

@@ -9,10 +9,10 @@ use serde::Deserialize;
 
 use crate::checks::{Checker, ConfigError, Range};
 use crate::model::Cantilever;
-pub use crate::vision::MAX_PROBES;
 use crate::vision::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
 };
+pub use crate::vision::{MAX_PROBES, SINGLE_NAME};
 
 // The accepted ranges of `[cantilever]` and `[tracker]`, documented with the same words
 // in config/probe.example.toml. The cantilever's span what AFM cantilevers are made as:
@@ -43,10 +43,18 @@ pub struct ProbeConfig {
     /// for its pose only: its estimates carry no force, and `run` refuses it.
     pub cantilever: Option<Cantilever>,
     pub tracker: TrackerConfig,
+    /// How its keys are spelt in messages: empty at the top level, `probe[i].` for
+    /// entry i.
+    prefix: String,
 }
 
-/// The name of the one probe a file gives at the top level (`[cantilever]`, `[tracker]`).
-pub const SINGLE_NAME: &str = "probe";
+impl ProbeConfig {
+    /// The full name of this probe's `key` (`tracker.calibration` is
+    /// `probe[1].tracker.calibration` for entry 1), as messages give it.
+    pub fn key(&self, key: &str) -> String {
+        format!("{}{key}", self.prefix)
+    }
+}
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -160,15 +168,11 @@ impl Section<'_> {
         self.check.invalid(&self.key(key), value, reason)
     }
 
-    fn inconsistent(&self, message: String) -> ConfigError {
-        self.check.inconsistent(message)
-    }
-
     /// A probe's name: it names files (`out.<name>.csv`), so letters, digits, `-` and
     /// `_`, at most [`MAX_NAME_CHARS`].
     fn name(&self, raw: Option<String>) -> Result<String, ConfigError> {
         let Some(name) = raw else {
-            return Err(self.inconsistent(format!(
+            return Err(self.check.inconsistent(format!(
                 "missing {} (each [[probe]] is named: it names its results file)",
                 self.key("name")
             )));
@@ -206,29 +210,30 @@ impl Section<'_> {
             name,
             cantilever,
             tracker,
+            prefix: self.prefix.clone(),
         })
     }
     fn cantilever(&self, raw: RawCantilever) -> Result<Cantilever, ConfigError> {
         let length_um = match raw.length_um {
             Some(v) => self.number("cantilever.length_um", v, LENGTH_UM)?,
             None => {
-                return Err(
-                    self.inconsistent(format!("missing {}", self.key("cantilever.length_um")))
-                )
+                return Err(self
+                    .check
+                    .inconsistent(format!("missing {}", self.key("cantilever.length_um"))))
             }
         };
         let section = [raw.youngs_modulus_gpa, raw.width_um, raw.thickness_um];
         let any_section = section.iter().any(Option::is_some);
         let flexural_rigidity_n_m2 = match (raw.spring_constant_n_per_m, any_section) {
             (Some(_), true) => {
-                return Err(self.inconsistent(format!(
+                return Err(self.check.inconsistent(format!(
                     "{}: give either spring_constant_n_per_m or \
                      youngs_modulus_gpa + width_um + thickness_um, not both",
                     self.key("cantilever")
                 )))
             }
             (None, false) => {
-                return Err(self.inconsistent(format!(
+                return Err(self.check.inconsistent(format!(
                     "{}: missing stiffness: give spring_constant_n_per_m, or \
                      youngs_modulus_gpa + width_um + thickness_um",
                     self.key("cantilever")
@@ -253,7 +258,7 @@ impl Section<'_> {
                     *slot = match value {
                         Some(v) => self.number(name, v, range)?,
                         None => {
-                            return Err(self.inconsistent(format!(
+                            return Err(self.check.inconsistent(format!(
                                 "missing {} (the cross-section needs youngs_modulus_gpa, \
                                  width_um and thickness_um)",
                                 self.key(name)

@@ -156,10 +156,7 @@ pub fn probe_trackers(config: &Config) -> anyhow::Result<Vec<Tracker>> {
 /// The tracker of one probe of `config`, calibrated on its `[tracker.calibration]`
 /// reference image (for recorded or live frames from a real SEM).
 pub fn tracker_from_config(config: &Config, probe: &ProbeConfig) -> anyhow::Result<Tracker> {
-    let section = match config.probes.iter().position(|p| p.name == probe.name) {
-        Some(i) if config.probes.len() > 1 => format!("probe[{i}].tracker.calibration"),
-        _ => "tracker.calibration".to_string(),
-    };
+    let section = probe.key("tracker.calibration");
     let Some(clicks) = &probe.tracker.calibration else {
         anyhow::bail!(
             "{}: no [{section}] section: the tracker needs a reference image and clicked \

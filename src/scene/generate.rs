@@ -3,7 +3,7 @@
 //! releasing, magnification jumps, the probe now and then out of view), and the test
 //! suite that spans every condition of docs/renderer.md for the tracker's accuracy tests.
 
-use super::geometry::{probe_outline, px_per_um, Entry, Pose};
+use super::geometry::{probe_outline, Entry};
 use super::rng::{sub_seed, Rng};
 use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
 use super::spec::{FrameSpec, Look, Others, Placement, Style};
@@ -207,22 +207,22 @@ impl Session {
                 blank: rng.chance(BLANK_FRACTION),
             }
         };
-        let with = |mut spec: FrameSpec, places: &[Placement]| {
-            let own = places[0];
-            spec.probe = own.probe;
-            spec.entry = own.entry;
-            spec.base_deg = own.base_deg;
-            spec.angle_deg = own.angle_deg;
-            spec.apex_px = own.apex_px;
-            spec.blank = own.blank;
-            spec.others = Others::of(&places[1..]);
-            spec
+        let with = |spec: FrameSpec, places: &[Placement]| FrameSpec {
+            others: Others::of(&places[1..]),
+            ..spec.placing(places[0])
         };
         let mut outline = Vec::new();
         let frames = (0..n)
             .map(|_| {
                 let style = pick_style(&mut rng);
                 let mag = SEVERAL_MAGNIFICATIONS[rng.int(0, 2) as usize];
+                // The frame's size and magnification, to measure each placed body.
+                let view = FrameSpec {
+                    width,
+                    height,
+                    magnification: mag,
+                    ..FrameSpec::new(style, 0.0, 0)
+                };
                 let mut places: Vec<Placement> = Vec::with_capacity(count);
                 for k in 0..count {
                     // Drawn again until its body keeps clear of the others' (a few
@@ -231,9 +231,9 @@ impl Session {
                     let placed = loop {
                         let angle = rng.uniform(-SEVERAL_ANGLE_DEG, SEVERAL_ANGLE_DEG);
                         let p = place(k, angle, &mut rng);
-                        let b = bounds(&p, mag, width, height, &mut outline);
-                        let clear = places.iter().all(|q| {
-                            !bounds(q, mag, width, height, &mut outline).meets(&b, SEVERAL_GAP_PX)
+                        let b = bounds(&view.placing(p), &mut outline);
+                        let clear = places.iter().all(|&q| {
+                            !bounds(&view.placing(q), &mut outline).meets(&b, SEVERAL_GAP_PX)
                         });
                         tries += 1;
                         if clear || tries == SEVERAL_TRIES {
@@ -296,29 +296,17 @@ impl Bounds {
     }
 }
 
-fn bounds(
-    p: &Placement,
-    magnification: f64,
-    width: u32,
-    height: u32,
-    outline: &mut Vec<[f64; 2]>,
-) -> Bounds {
+/// The bounds of `spec`'s own probe.
+fn bounds(spec: &FrameSpec, outline: &mut Vec<[f64; 2]>) -> Bounds {
     let empty = Bounds {
         lo: [f64::INFINITY; 2],
         hi: [f64::NEG_INFINITY; 2],
     };
-    if p.blank {
+    if spec.blank {
         return empty;
     }
-    let pose = Pose {
-        entry: p.entry,
-        base_deg: p.base_deg,
-        angle_deg: p.angle_deg,
-        apex_px: p.apex_px,
-        px_per_um: px_per_um(width, magnification),
-    };
-    probe_outline(&p.probe, &pose, width, height, outline);
-    let (w, h) = (f64::from(width), f64::from(height));
+    probe_outline(&spec.probe, &spec.pose(), spec.width, spec.height, outline);
+    let (w, h) = (f64::from(spec.width), f64::from(spec.height));
     outline
         .iter()
         .filter(|v| (0.0..=w).contains(&v[0]) && (0.0..=h).contains(&v[1]))

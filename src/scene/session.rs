@@ -14,7 +14,9 @@ use super::geometry::{Entry, ProbeGeometry};
 use super::render::{truth_of, Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
-use crate::vision::{CalibrationConfig, Threshold, TrackerConfig};
+use crate::vision::{
+    Calibration, CalibrationConfig, Threshold, Tracker, TrackerConfig, VisionError, SINGLE_NAME,
+};
 
 /// Magnifications an operator picks from (those of the public samples).
 pub const MAGNIFICATIONS: [f64; 6] = [1000.0, 1500.0, 2000.0, 3500.0, 5000.0, 8000.0];
@@ -95,7 +97,7 @@ impl Session {
     /// `[[probe]]` entries, and the names of its `truth.<name>.csv` files).
     pub fn probe_names(&self) -> Vec<String> {
         match self.reference.probe_count() {
-            1 => vec!["probe".to_string()],
+            1 => vec![SINGLE_NAME.to_string()],
             n => (1..=n).map(|k| format!("probe{k}")).collect(),
         }
     }
@@ -103,18 +105,48 @@ impl Session {
     /// The `[tracker]` settings of probe `k` (as [`Session::probe_toml`] writes them),
     /// its calibration clicks from [`Session::clicks_of`].
     pub fn tracker_config_of(&self, k: usize) -> TrackerConfig {
-        let clicks = self.clicks_of(k);
+        self.tracker_config_with(self.calibration_of(k))
+    }
+
+    /// The session's `[tracker]` settings with the calibration `clicks`.
+    fn tracker_config_with(&self, clicks: CalibrationConfig) -> TrackerConfig {
         TrackerConfig {
             threshold: self.threshold,
             window_deg: self.window_deg,
-            calibration: Some(CalibrationConfig {
-                reference_image: "reference.png".into(),
-                red: clicks.red,
-                blue: clicks.blue,
-                green: clicks.green,
-            }),
+            calibration: Some(clicks),
             ..TrackerConfig::default()
         }
+    }
+
+    /// The `[tracker.calibration]` of probe `k`: the reference and its clicks.
+    fn calibration_of(&self, k: usize) -> CalibrationConfig {
+        let clicks = self.clicks_of(k);
+        CalibrationConfig {
+            reference_image: "reference.png".into(),
+            red: clicks.red,
+            blue: clicks.blue,
+            green: clicks.green,
+        }
+    }
+
+    /// A tracker for each probe of the reference, in order, calibrated on the rendered
+    /// reference with [`Session::tracker_config_of`] and forces from its geometry: the
+    /// trackers `replay` builds from the session's probe.toml.
+    pub fn trackers(&self) -> Result<Vec<Tracker>, VisionError> {
+        let mut reference = GrayImage::new(1, 1);
+        Renderer::new().render_into(&self.reference, &mut reference);
+        (0..self.reference.probe_count())
+            .map(|k| {
+                let clicks = self.calibration_of(k);
+                let cfg = self.tracker_config_with(clicks.clone());
+                let cal = Calibration::from_reference(&reference, &clicks, &cfg)?;
+                let probe = self
+                    .reference
+                    .nth_probe(k)
+                    .map_or(*self.probe(), |s| s.probe);
+                Ok(Tracker::new(&cfg, cal, Some(probe.cantilever())))
+            })
+            .collect()
     }
 
     /// As [`Session::clicks`] for probe `k` of the reference (0: its own, then the
@@ -193,13 +225,7 @@ impl Session {
                 .nth_probe(k)
                 .map_or(*self.probe(), |s| s.probe);
             let clicks = self.clicks_of(k);
-            let points = |v: &[[f64; 2]]| {
-                let items: Vec<String> = v
-                    .iter()
-                    .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
-                    .collect();
-                format!("[{}]", items.join(", "))
-            };
+            let points = CalibrationConfig::toml_points;
             let _ = write!(
                 text,
                 "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n\

@@ -4,6 +4,7 @@
 
 use super::background::{Needle, RealLook};
 use super::geometry::{px_per_um, Entry, Pose, ProbeGeometry};
+use crate::vision::MAX_PROBES;
 
 /// The looks of the public samples, from an easy frame to a hard one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -166,8 +167,8 @@ pub struct FrameSpec {
     pub others: Others,
 }
 
-/// Most probes a frame shows besides its first (an S100 carries up to four positioners).
-pub const MAX_OTHER_PROBES: usize = 3;
+/// Most probes a frame shows besides its first.
+pub const MAX_OTHER_PROBES: usize = MAX_PROBES - 1;
 
 /// The other probes of a frame, up to [`MAX_OTHER_PROBES`], in order.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -255,15 +256,22 @@ impl FrameSpec {
             k => *self.others.iter().nth(k - 1)?,
         };
         Some(FrameSpec {
+            others: Others::NONE,
+            ..self.placing(place)
+        })
+    }
+
+    /// This frame with its own (first) probe placed as `place`; the others stay.
+    pub fn placing(&self, place: Placement) -> FrameSpec {
+        FrameSpec {
             probe: place.probe,
             entry: place.entry,
             base_deg: place.base_deg,
             angle_deg: place.angle_deg,
             apex_px: place.apex_px,
             blank: place.blank,
-            others: Others::NONE,
             ..*self
-        })
+        }
     }
 
     pub fn px_per_um(&self) -> f64 {

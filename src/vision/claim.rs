@@ -97,6 +97,14 @@ impl Claim {
     }
 }
 
+/// No body claimed: what a tracker rules out when it tracks on its own.
+pub const NO_CLAIMS: [Option<Claim>; MAX_PROBES - 1] = [None; MAX_PROBES - 1];
+
+/// Whether point `p` lies on any of the bodies `claims`.
+pub fn claimed(claims: &[Option<Claim>], p: [f64; 2]) -> bool {
+    claims.iter().flatten().any(|c| c.contains(p))
+}
+
 fn cross(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[1] - a[1] * b[0]
 }

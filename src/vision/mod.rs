@@ -60,7 +60,9 @@ pub use options::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
 };
 pub use overlay::{draw_calibration, draw_overlay, draw_overlays};
-pub use probes::{refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES};
+pub use probes::{
+    refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES, SINGLE_NAME,
+};
 pub use simd::set_avx2;
 pub use tracker::Tracker;
 

@@ -130,4 +130,13 @@ impl CalibrationConfig {
         }
         self
     }
+
+    /// Clicked pixels as a lab file writes them: `[[x, y], ...]` to 0.1 px.
+    pub fn toml_points(points: &[[f64; 2]]) -> String {
+        let items: Vec<String> = points
+            .iter()
+            .map(|p| format!("[{:.1}, {:.1}]", p[0], p[1]))
+            .collect();
+        format!("[{}]", items.join(", "))
+    }
 }

@@ -16,6 +16,10 @@ pub use super::claim::{Claim, MAX_PROBES};
 use super::tracker::Detection;
 use super::{Estimate, Miss, Tracker};
 
+/// The name a probe goes by when it is the only one (a lab file's top-level
+/// `[cantilever]` and `[tracker]`, a rendered session of one probe).
+pub const SINGLE_NAME: &str = "probe";
+
 /// How far one probe's scale may stray from the others' (calibrated on the same
 /// reference) as a ratio: one frame has one magnification, so every probe calibrated
 /// on one reference image is seen at one scale. A tracker that took another probe's
@@ -91,7 +95,6 @@ impl ProbeSet {
         assert_eq!(out.len(), self.trackers.len(), "one estimate per probe");
         self.shared.clear();
         for (tracker, estimate) in self.trackers.iter_mut().zip(out.iter_mut()) {
-            tracker.exclude(&[]);
             *estimate = tracker.track_sharing(frame, &mut self.shared);
         }
         // Each round settles one conflict; a probe searched again is searched with

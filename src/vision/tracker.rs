@@ -17,7 +17,7 @@ use image::GrayImage;
 use super::bands::{bands, bend_prior, refined_pose, visible_segment};
 use super::calibration::Calibration;
 use super::candidates::Candidates;
-use super::claim::{Claim, MAX_PROBES};
+use super::claim::{claimed, Claim, MAX_PROBES, NO_CLAIMS};
 use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
@@ -173,7 +173,7 @@ impl Tracker {
             coherence: true,
             last: None,
             last_before: None,
-            excluded: [None; MAX_PROBES - 1],
+            excluded: NO_CLAIMS,
             det: Detection::default(),
             hough: Hough::default(),
             cands: Candidates::default(),
@@ -206,7 +206,7 @@ impl Tracker {
     /// Tracks the tip in one 8-bit frame.
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
         self.det.built = None;
-        self.excluded = [None; MAX_PROBES - 1];
+        self.excluded = NO_CLAIMS;
         self.track_frame(frame)
     }
 
@@ -214,16 +214,16 @@ impl Tracker {
     /// (from another probe's tracker) reused where they match this tracker's (the same
     /// binning, the same edge threshold); `shared` then holds this tracker's.
     pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
+        self.excluded = NO_CLAIMS;
+        self.track_in(frame, shared)
+    }
+
+    /// Tracks `frame` on the detection stages of `shared`, leaving this tracker's there.
+    fn track_in(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
         std::mem::swap(&mut self.det, shared);
         let estimate = self.track_frame(frame);
         std::mem::swap(&mut self.det, shared);
         estimate
-    }
-
-    /// Rules out the pyramids `claims` (other probes' tips in the frame about to be
-    /// tracked); none: nothing is ruled out.
-    pub(super) fn exclude(&mut self, claims: &[Claim]) {
-        self.excluded = std::array::from_fn(|k| claims.get(k).copied());
     }
 
     /// Rules out one more pyramid; false when it already was, or no room is left.
@@ -248,12 +248,7 @@ impl Tracker {
         shared: &mut Detection,
     ) -> Estimate {
         self.last = self.last_before;
-        self.track_sharing(frame, shared)
-    }
-
-    /// Whether a placement's apex (frame pixels) lies on a pyramid ruled out.
-    fn ruled_out(&self, apex: [f64; 2]) -> bool {
-        self.excluded.iter().flatten().any(|c| c.contains(apex))
+        self.track_in(frame, shared)
     }
 
     fn track_frame(&mut self, frame: &GrayImage) -> Estimate {
@@ -349,10 +344,7 @@ impl Tracker {
         }
         // Placements on another probe's claimed pyramid are not this probe's.
         let (excluded, pyr) = (&self.excluded, &self.det.pyr);
-        let ruled_out = |apex: [f64; 2]| {
-            let apex = pyr.to_frame(apex);
-            excluded.iter().flatten().any(|c| c.contains(apex))
-        };
+        let ruled_out = |apex: [f64; 2]| claimed(excluded, pyr.to_frame(apex));
         let Some(hyp) = self
             .search
             .run(t, &self.cands, &self.det.edges, prior, &ruled_out)
@@ -536,7 +528,7 @@ impl Tracker {
             });
         }
         let apex = t.true_apex(pose, self.edge_bias_px);
-        if self.ruled_out(apex) {
+        if claimed(&self.excluded, apex) {
             // Not a verdict on this probe: the runners-up are tried.
             return Estimate::missed(Miss::OtherProbe, 0.0);
         }
