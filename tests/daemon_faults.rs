@@ -165,6 +165,7 @@ impl HapticDevice for Haptic {
         Ok(HapticSample {
             position_mm: *self.0.position_mm.lock().unwrap(),
             velocity_mm_s: Vector3::zeros(),
+            buttons: 0,
         })
     }
     fn write_force(&mut self, force_n: Vector3<f64>) -> Result<(), HapticError> {

@@ -52,6 +52,7 @@ impl HapticDevice for Stylus {
         Ok(HapticSample {
             position_mm: Vector3::zeros(),
             velocity_mm_s: Vector3::zeros(),
+            buttons: 0,
         })
     }
     fn write_force(&mut self, _force_n: Vector3<f64>) -> Result<(), HapticError> {

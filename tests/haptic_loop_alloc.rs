@@ -92,6 +92,7 @@ impl HapticDevice for Haptic {
         Ok(HapticSample {
             position_mm: Vector3::new(x, 0.0, 0.0),
             velocity_mm_s: Vector3::zeros(),
+            buttons: 0,
         })
     }
     fn write_force(&mut self, _force_n: Vector3<f64>) -> Result<(), HapticError> {

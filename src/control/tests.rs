@@ -98,6 +98,7 @@ impl Bench {
         let haptic = self.haptic_ok.then_some(HapticSample {
             position_mm: self.position_mm,
             velocity_mm_s: Vector3::zeros(),
+            buttons: 0,
         });
         self.c.tick(&TickInput {
             now_s: self.now_s,

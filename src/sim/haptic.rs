@@ -31,6 +31,7 @@ impl HapticDevice for SimHaptic {
         Ok(HapticSample {
             position_mm: self.operator.position_mm(),
             velocity_mm_s: self.operator.velocity_mm_s(),
+            buttons: 0,
         })
     }
 

@@ -151,6 +151,7 @@ impl HapticDevice for HidHaptic {
         Ok(HapticSample {
             position_mm: self.position_mm,
             velocity_mm_s: self.velocity_mm_s,
+            buttons: 0,
         })
     }
 

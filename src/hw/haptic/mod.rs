@@ -9,7 +9,16 @@ use nalgebra::Vector3;
 pub struct HapticSample {
     pub position_mm: Vector3<f64>,
     pub velocity_mm_s: Vector3<f64>,
+    /// The stylus buttons held down, one bit each: bit 0 the first (front) button,
+    /// bit 1 the second. [`SWITCH_BUTTON`] moves the stylus to the next felt probe.
+    pub buttons: u32,
 }
+
+/// The button (its bit in [`HapticSample::buttons`]) that switches the stylus to the
+/// next probe it feels: the PHANToM's second button. Pressing it stops motion until the
+/// stylus is back at the centre (the deadman re-engage), then the stylus drives and
+/// feels the next probe.
+pub const SWITCH_BUTTON: u32 = 1 << 1;
 
 #[derive(Debug, thiserror::Error)]
 pub enum HapticError {

@@ -264,6 +264,7 @@ impl HapticDevice for OpenHaptics {
         Ok(HapticSample {
             position_mm: Vector3::from(s.position_mm),
             velocity_mm_s: Vector3::from(s.velocity_mm_s),
+            buttons: 0,
         })
     }
 
