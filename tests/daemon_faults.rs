@@ -11,7 +11,7 @@ use nalgebra::Vector3;
 use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
 use nanoforce::daemon::{Daemon, Devices, Estimator, ExitReason, LoopOptions, RunOptions};
 use nanoforce::hw::daq::{DaqError, RateOutput};
-use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
+use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource, NO_TRUTH};
 use nanoforce::hw::haptic::{HapticDevice, HapticError};
 use nanoforce::hw::Clock;
 use nanoforce::vision::Estimate;
@@ -89,15 +89,15 @@ impl FrameSource for Frames {
         Ok(FrameMeta {
             sequence: self.sequence,
             captured_s: self.clock.now_s(),
-            truth: None,
+            truth: NO_TRUTH,
         })
     }
 }
 
 struct Tracker(Arc<Lab>);
 
-impl Estimator for Tracker {
-    fn estimate(&mut self, _frame: &GrayImage) -> Estimate {
+impl Tracker {
+    fn next_estimate(&mut self) -> Estimate {
         assert!(
             !self.0.tracker_panics.load(Ordering::SeqCst),
             "injected tracker panic"
@@ -107,6 +107,12 @@ impl Estimator for Tracker {
             std::thread::sleep(Duration::from_millis(delay));
         }
         self.0.estimate.lock().unwrap().unwrap_or_default()
+    }
+}
+
+impl Estimator for Tracker {
+    fn estimate(&mut self, _frame: &GrayImage, estimates: &mut [Estimate]) {
+        estimates[0] = self.next_estimate();
     }
 }
 
@@ -193,17 +199,17 @@ fn gains() -> TeleopGains {
 
 fn start(lab: &Arc<Lab>, frame_period_ms: u64) -> nanoforce::daemon::DaemonHandle {
     let clock = Clock::start();
-    let devices = Devices {
-        frames: Box::new(Frames {
+    let devices = Devices::one_probe(
+        Box::new(Frames {
             lab: lab.clone(),
             clock,
             period: Duration::from_millis(frame_period_ms),
             sequence: 0,
         }),
-        estimator: Box::new(Tracker(lab.clone())),
-        stage: Box::new(Stage(lab.clone())),
-        haptic: Box::new(Haptic(lab.clone())),
-    };
+        Box::new(Tracker(lab.clone())),
+        Box::new(Stage(lab.clone())),
+        Box::new(Haptic(lab.clone())),
+    );
     let options = RunOptions {
         clock,
         loop_options: LoopOptions {
@@ -446,17 +452,17 @@ fn a_panic_in_any_thread_stops_with_outputs_at_zero() {
         *lab.estimate.lock().unwrap() = detected(500.0);
         let session = tempfile::tempdir().unwrap();
         let clock = Clock::start();
-        let devices = Devices {
-            frames: Box::new(Frames {
+        let devices = Devices::one_probe(
+            Box::new(Frames {
                 lab: lab.clone(),
                 clock,
                 period: Duration::from_millis(10),
                 sequence: 0,
             }),
-            estimator: Box::new(Tracker(lab.clone())),
-            stage: Box::new(Stage(lab.clone())),
-            haptic: Box::new(Haptic(lab.clone())),
-        };
+            Box::new(Tracker(lab.clone())),
+            Box::new(Stage(lab.clone())),
+            Box::new(Haptic(lab.clone())),
+        );
         let options = RunOptions {
             clock,
             loop_options: LoopOptions {

@@ -220,12 +220,12 @@ fn run_suite(seed: u64) {
         let scene = scene.clone();
         std::thread::spawn(move || produce(&fifo, &scene, seed, phases_s))
     };
-    let devices = Devices {
-        frames: Box::new(frames),
-        estimator: Box::new(VisionEstimator(tracker)),
-        stage: Box::new(Stage),
-        haptic: Box::new(Stylus),
-    };
+    let devices = Devices::one_probe(
+        Box::new(frames),
+        Box::new(VisionEstimator::single(tracker)),
+        Box::new(Stage),
+        Box::new(Stylus),
+    );
     let options = RunOptions {
         duration: Some(Duration::from_secs_f64(phases_s.iter().sum::<f64>() + 0.3)),
         session_dir: Some(session.clone()),

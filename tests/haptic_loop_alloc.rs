@@ -12,7 +12,7 @@ use nanoforce::control::{HapticSample, SafetyState, TeleopGains};
 use nanoforce::daemon::stream::StreamConfig;
 use nanoforce::daemon::{Daemon, Devices, Estimator, LoopOptions, RunOptions};
 use nanoforce::hw::daq::{DaqError, RateOutput};
-use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource};
+use nanoforce::hw::frames::{FrameError, FrameMeta, FrameSource, NO_TRUTH};
 use nanoforce::hw::haptic::{HapticDevice, HapticError};
 use nanoforce::hw::Clock;
 use nanoforce::vision::Estimate;
@@ -36,7 +36,7 @@ impl FrameSource for Frames {
         Ok(FrameMeta {
             sequence: self.1,
             captured_s: self.0.now_s(),
-            truth: None,
+            truth: NO_TRUTH,
         })
     }
 }
@@ -44,8 +44,8 @@ impl FrameSource for Frames {
 /// Alternates the force so the ramp keeps retargeting, and every third frame jumps
 /// far enough for the plausibility gate to hold it.
 struct Tracker(u64);
-impl Estimator for Tracker {
-    fn estimate(&mut self, _frame: &GrayImage) -> Estimate {
+impl Tracker {
+    fn next_estimate(&mut self) -> Estimate {
         self.0 += 1;
         let force_nn = match self.0 % 6 {
             0 | 3 => 3000.0,
@@ -60,6 +60,12 @@ impl Estimator for Tracker {
             angle_sigma_deg: Some(0.05),
             ..Estimate::default()
         }
+    }
+}
+
+impl Estimator for Tracker {
+    fn estimate(&mut self, _frame: &GrayImage, estimates: &mut [Estimate]) {
+        estimates[0] = self.next_estimate();
     }
 }
 
@@ -107,12 +113,12 @@ impl HapticDevice for Haptic {
 fn haptic_loop_does_not_allocate_in_steady_state() {
     let clock = Clock::start();
     let velocity = Arc::new(AtomicU64::new(0));
-    let devices = Devices {
-        frames: Box::new(Frames(clock, 0)),
-        estimator: Box::new(Tracker(0)),
-        stage: Box::new(Stage(velocity.clone())),
-        haptic: Box::new(Haptic),
-    };
+    let devices = Devices::one_probe(
+        Box::new(Frames(clock, 0)),
+        Box::new(Tracker(0)),
+        Box::new(Stage(velocity.clone())),
+        Box::new(Haptic),
+    );
     let receiver = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let options = RunOptions {
         clock,

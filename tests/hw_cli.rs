@@ -207,7 +207,7 @@ fn the_lab_example_config_is_valid() {
     let cfg = nanoforce::config::Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
     assert!(matches!(cfg.devices.frames, FramesBackend::V4l2(_)));
     assert!(matches!(cfg.devices.haptic, HapticBackend::OpenHaptics(_)));
-    let DaqBackend::Comedi(daq) = &cfg.devices.daq else {
+    let DaqBackend::Comedi(daq) = &cfg.devices.positioners[0].daq else {
         panic!("comedi expected")
     };
     assert_eq!(daq.axis_devices[2], Path::new("/dev/comedi0"));

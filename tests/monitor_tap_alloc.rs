@@ -27,7 +27,7 @@ fn offering_snapshots_does_not_allocate_after_warm_up() {
     let mut offer = |tap: &mut nanoforce::daemon::snapshot::SnapshotTap, n: usize| {
         for _ in 0..n {
             t += 1.0 / 60.0;
-            tap.offer(t, &frame, &estimate);
+            tap.offer(t, &frame, &[estimate]);
         }
     };
     // Warm-up: the reader takes frames as the monitor would, so every slot is used.

@@ -414,6 +414,7 @@ fn the_documented_python_reader_reads_the_stream() {
     for seq in 1..=COUNT {
         let detected = !seq.is_multiple_of(4);
         let estimate = Published {
+            probe: 0,
             seq,
             frame_sequence: seq + 100,
             frame_time_s: clock.now_s(),

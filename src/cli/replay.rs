@@ -19,7 +19,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::replay_pool::{replay_frames, Frames, Job};
 use crate::config::Config;
-use crate::daemon::lab::{live_tracker, probe_trackers};
+use crate::daemon::lab::{live_trackers, probe_trackers};
 use crate::hw::frames::recording::FrameFile;
 use crate::session::frames::list_frames;
 use crate::session::live::{is_live_session, SessionInfo, CONFIG_FILE, SESSION_FILE};
@@ -128,15 +128,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         })
         .collect();
     let probes = || match session {
-        Some(_) => Ok(ProbeSet::new(vec![live_tracker(&config)?], &[()])),
-        None => Ok(ProbeSet::new(probe_trackers(&config)?, &references)),
+        Some(_) => live_trackers(&config),
+        None => probe_trackers(&config),
     };
     probes()?;
     let names: Vec<&str> = config.probes.iter().map(|p| p.name.as_str()).collect();
     let inputs = Inputs {
         config: &config_path,
         references: references.iter().flatten().copied().collect(),
-        csvs: csv_paths(&args.csv, &names),
+        csvs: results::per_probe(&args.csv, &names),
     };
     let summary = match &session {
         Some(info) => replay_session(&args, info, &inputs, &probes)?,
@@ -201,31 +201,8 @@ pub struct Inputs<'a> {
     pub config: &'a Path,
     /// The probes' reference images.
     pub references: Vec<&'a Path>,
-    /// The results CSV of each probe, with its name (see [`csv_paths`]).
+    /// The results CSV of each probe, with its name (see [`results::per_probe`]).
     pub csvs: Vec<(String, PathBuf)>,
-}
-
-/// The results CSV of each probe: `csv` itself for one probe; for several, `csv` with
-/// the probe's name before its extension (`out.csv` -> `out.left.csv`).
-pub fn csv_paths(csv: &Path, names: &[&str]) -> Vec<(String, PathBuf)> {
-    if let [name] = names {
-        return vec![(name.to_string(), csv.to_path_buf())];
-    }
-    let stem = csv
-        .file_stem()
-        .map_or_else(String::new, |s| s.to_string_lossy().to_string());
-    let ext = csv
-        .extension()
-        .map_or_else(|| "csv".to_string(), |e| e.to_string_lossy().to_string());
-    names
-        .iter()
-        .map(|name| {
-            (
-                name.to_string(),
-                csv.with_file_name(format!("{stem}.{name}.{ext}")),
-            )
-        })
-        .collect()
 }
 
 /// Writes each probe's results CSV of `frames` (overlays named `overlay_names`),

@@ -9,7 +9,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Args;
 
-use crate::config::{Config, Number};
+use crate::config::{Config, Number, ProbeConfig};
 use crate::daemon::inject::PanicInjection;
 use crate::daemon::instance::{self, InstanceLock};
 use crate::daemon::notify::Notifier;
@@ -308,10 +308,9 @@ fn restart_sections(running: &Config, new: &Config) -> Vec<&'static str> {
         }
     };
     let (was, now) = (&running.probes, &new.probes);
-    check(
-        "probe",
-        was.iter().map(|p| &p.name).eq(now.iter().map(|p| &p.name)),
-    );
+    // A probe's name, whether it is felt, its pressing sign and its simulated place.
+    let entry = |p: &ProbeConfig| (p.name.clone(), p.felt, p.pressing_force_sign, p.sim.clone());
+    check("probe", was.iter().map(entry).eq(now.iter().map(entry)));
     check(
         "cantilever",
         was.iter()
@@ -325,7 +324,10 @@ fn restart_sections(running: &Config, new: &Config) -> Vec<&'static str> {
             .eq(now.iter().map(|p| &p.tracker)),
     );
     check("frames", running.devices.frames == new.devices.frames);
-    check("daq", running.devices.daq == new.devices.daq);
+    check(
+        "daq",
+        running.devices.positioners == new.devices.positioners,
+    );
     check("haptic", running.devices.haptic == new.devices.haptic);
     check("daemon", running.daemon == new.daemon);
     check("monitor", running.monitor == new.monitor);

@@ -43,7 +43,8 @@ pub struct Config {
     pub probes: Vec<ProbeConfig>,
     /// `[teleop]` and `[safety]`: the gains SIGHUP may reload.
     pub teleop: TeleopGains,
-    /// `[frames]`, `[daq]`, `[haptic]`: which backend drives each device.
+    /// `[frames]`, `[haptic]` and each probe's `[daq]`: which backend drives each
+    /// device.
     pub devices: DevicesConfig,
     pub daemon: DaemonConfig,
     /// `[monitor]`: the live web page (off by default) and recorded thumbnails.
@@ -88,7 +89,10 @@ impl Config {
             message: err.to_string().trim_end().to_string(),
         })?;
         let check = Checker { file: path };
-        let probes = probe::probes(&check, raw.cantilever, raw.tracker, raw.probe)?;
+        let probe::Probes {
+            probes,
+            positioners,
+        } = probe::probes(&check, raw.cantilever, raw.tracker, raw.daq, raw.probe)?;
         let mut teleop = TeleopGains::validate(
             raw.teleop.unwrap_or_default(),
             raw.safety.unwrap_or_default(),
@@ -99,7 +103,7 @@ impl Config {
         }
         let devices = DevicesConfig::validate(
             raw.frames.unwrap_or_default(),
-            raw.daq.unwrap_or_default(),
+            positioners,
             raw.haptic.unwrap_or_default(),
             &check,
         )?;
@@ -480,6 +484,105 @@ window_deg = 10
             "[cantilever]\nlength_um = 400\nspring_constant_n_per_m = 1\n{TWO}"
         ));
         assert!(msg.contains("not both"), "{msg}");
+    }
+
+    #[test]
+    fn each_probe_has_its_positioner_and_feel() {
+        use crate::hw::config::DaqBackend;
+        use crate::scene::Entry;
+        let cfg = parse(TWO).unwrap();
+        let sections: Vec<&str> = cfg
+            .devices
+            .positioners
+            .iter()
+            .map(|p| p.section.as_str())
+            .collect();
+        assert_eq!(sections, ["probe[0].daq", "probe[1].daq"]);
+        assert!(cfg.devices.all_simulated());
+        // Felt: the probe with a cantilever; the needle is tracked only.
+        assert!(cfg.probes[0].felt && !cfg.probes[1].felt);
+        // Placed where the simulated view keeps two probes apart, facing each other.
+        assert_eq!(cfg.probes[0].sim.entry, Entry::Left);
+        assert_eq!(cfg.probes[1].sim.entry, Entry::Right);
+        assert_eq!(parse(SAMPLE).unwrap().devices.positioners[0].section, "daq");
+
+        let comedi = "[probe.daq]\nbackend = \"comedi\"\n[probe.daq.x]\noutput = \"none\"\n\
+                      [probe.daq.y]\noutput = \"none\"\n[probe.daq.z]\noutput = \"analog\"\n\
+                      subdevice = 1\nchannel = 7\nvolts_per_um_s = 0.1\n";
+        let cfg = parse(&format!("{TWO}{comedi}")).unwrap();
+        let DaqBackend::Comedi(daq) = &cfg.devices.positioners[1].daq else {
+            panic!("the needle's positioner is on the DAQ")
+        };
+        assert_eq!(daq.device, Path::new("/dev/comedi0"));
+        assert_eq!(cfg.devices.positioners[0].daq, DaqBackend::Sim);
+        let msg = error_of(&format!(
+            "{TWO}{}",
+            comedi.replace("channel = 7", "channel = 700")
+        ));
+        assert!(
+            msg.contains("probe[1].daq.z.channel = 700 is out of range"),
+            "{msg}"
+        );
+        let msg = error_of(&format!("{TWO}[probe.daq]\nbackend = \"ni\"\n"));
+        assert!(msg.contains("probe[1].daq.backend = \"ni\""), "{msg}");
+        // The lone probe's [daq] has no place beside entries.
+        let msg = error_of(&format!("[daq]\nbackend = \"sim\"\n{TWO}"));
+        assert!(
+            msg.contains("give each probe's positioner as its [probe.daq]"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn probe_feel_and_place_are_checked() {
+        let msg = error_of(&TWO.replace(
+            "window_deg = 10",
+            "window_deg = 10\n[probe.sim]\nentry = \"top\"",
+        ));
+        assert!(
+            msg.contains("probe[1].sim.entry must be \"left\" or \"right\", got \"top\""),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace(
+            "window_deg = 10",
+            "window_deg = 10\n[probe.sim]\napex_at = [0.5, 1.5]",
+        ));
+        assert!(
+            msg.contains("probe[1].sim.apex_at[1] = 1.5 is out of range"),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace(
+            "window_deg = 10",
+            "window_deg = 10\n[probe.sim]\nstart_um = -3",
+        ));
+        assert!(
+            msg.contains("probe[1].sim.start_um = -3 is out of range"),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace("name = \"needle\"", "name = \"needle\"\nfelt = true"));
+        assert!(
+            msg.contains("probe[1].felt needs the probe's [cantilever]"),
+            "{msg}"
+        );
+        let msg = error_of(&TWO.replace(
+            "name = \"left\"",
+            "name = \"left\"\npressing_force_sign = 2",
+        ));
+        assert!(
+            msg.contains("probe[0].pressing_force_sign must be 1 or -1, got 2"),
+            "{msg}"
+        );
+        let cfg = parse(&TWO.replace(
+            "name = \"left\"",
+            "name = \"left\"\npressing_force_sign = -1\nfelt = false",
+        ))
+        .unwrap();
+        assert_eq!(cfg.probes[0].pressing_force_sign, Some(-1.0));
+        assert!(!cfg.probes[0].felt);
+        // A probe's gains: [teleop] with its cantilever and sign.
+        let gains = cfg.probes[0].gains(&cfg.teleop);
+        assert_eq!(gains.pressing_force_sign, -1.0);
+        assert_eq!(gains.cantilever, cfg.probes[0].cantilever.unwrap());
     }
 
     #[test]

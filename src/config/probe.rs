@@ -8,7 +8,10 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::checks::{Checker, ConfigError, Range};
+use crate::control::TeleopGains;
+use crate::hw::config::RawDevice;
 use crate::model::Cantilever;
+use crate::sim::config::{RawSimProbe, SimProbe};
 use crate::vision::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
 };
@@ -43,6 +46,15 @@ pub struct ProbeConfig {
     /// for its pose only: its estimates carry no force, and `run` refuses it.
     pub cantilever: Option<Cantilever>,
     pub tracker: TrackerConfig,
+    /// The haptic device feels it (and drives its positioner) when it is the probe
+    /// switched to: a probe with a cantilever, unless `felt = false`.
+    pub felt: bool,
+    /// `pressing_force_sign` of the entry: the sign of its tracked force while it
+    /// presses (a probe entering the view from the other side bends the other way on
+    /// screen); None: `[teleop]`'s.
+    pub pressing_force_sign: Option<f64>,
+    /// Where the simulated lab shows it and starts its positioner.
+    pub sim: SimProbe,
     /// How its keys are spelt in messages: empty at the top level, `probe[i].` for
     /// entry i.
     prefix: String,
@@ -53,6 +65,18 @@ impl ProbeConfig {
     /// `probe[1].tracker.calibration` for entry 1), as messages give it.
     pub fn key(&self, key: &str) -> String {
         format!("{}{key}", self.prefix)
+    }
+
+    /// The teleoperation gains while the stylus feels this probe: `[teleop]` and
+    /// `[safety]` with its cantilever and pressing sign.
+    pub fn gains(&self, teleop: &TeleopGains) -> TeleopGains {
+        TeleopGains {
+            cantilever: self.cantilever.unwrap_or(teleop.cantilever),
+            pressing_force_sign: self
+                .pressing_force_sign
+                .unwrap_or(teleop.pressing_force_sign),
+            ..teleop.clone()
+        }
     }
 }
 
@@ -94,32 +118,60 @@ pub(super) struct RawProbe {
     name: Option<String>,
     cantilever: Option<RawCantilever>,
     tracker: Option<RawTracker>,
+    /// Its positioner's DAQ outputs, read as `[daq]` is.
+    daq: Option<RawDevice>,
+    felt: Option<bool>,
+    pressing_force_sign: Option<f64>,
+    sim: Option<RawSimProbe>,
 }
 
-/// The probes of a file: its top-level `[cantilever]` and `[tracker]` (one probe) or
-/// its `[[probe]]` entries (one to [`MAX_PROBES`], each named, the names unique), not
-/// both.
+/// The probes of a file and, for each in order, the DAQ section of its positioner with
+/// the name messages give it.
+pub(super) struct Probes {
+    pub probes: Vec<ProbeConfig>,
+    pub positioners: Vec<(String, RawDevice)>,
+}
+
+/// The probes of a file: its top-level `[cantilever]`, `[tracker]` and `[daq]` (one
+/// probe) or its `[[probe]]` entries (one to [`MAX_PROBES`], each named, the names
+/// unique, each with its own `[probe.daq]`), not both.
 pub(super) fn probes(
     check: &Checker,
     cantilever: Option<RawCantilever>,
     tracker: Option<RawTracker>,
+    daq: Option<RawDevice>,
     entries: Option<Vec<RawProbe>>,
-) -> Result<Vec<ProbeConfig>, ConfigError> {
+) -> Result<Probes, ConfigError> {
     let Some(entries) = entries else {
         let single = Section {
             check,
             prefix: String::new(),
         };
-        return Ok(vec![single.probe(
-            SINGLE_NAME.to_string(),
+        let raw = RawProbe {
+            name: None,
             cantilever,
             tracker,
-        )?]);
+            daq: None,
+            felt: None,
+            pressing_force_sign: None,
+            sim: None,
+        };
+        return Ok(Probes {
+            probes: vec![single.probe(SINGLE_NAME.to_string(), raw, (0, 1))?],
+            positioners: vec![("daq".into(), daq.unwrap_or_default())],
+        });
     };
     if cantilever.is_some() || tracker.is_some() {
         return Err(check.inconsistent(
             "give one probe as [cantilever] and [tracker], or several as [[probe]] entries \
              (each with its own cantilever and tracker), not both"
+                .into(),
+        ));
+    }
+    if daq.is_some() {
+        return Err(check.inconsistent(
+            "[daq] drives the positioner of a lone probe: with [[probe]] entries, give each \
+             probe's positioner as its [probe.daq] (the simulated stage when left out)"
                 .into(),
         ));
     }
@@ -130,13 +182,15 @@ pub(super) fn probes(
             &format!("needs 1 to {MAX_PROBES} [[probe]] entries (an S100 carries up to four positioners)"),
         ));
     }
-    let mut probes: Vec<ProbeConfig> = Vec::with_capacity(entries.len());
-    for (i, raw) in entries.into_iter().enumerate() {
+    let count = entries.len();
+    let mut probes: Vec<ProbeConfig> = Vec::with_capacity(count);
+    let mut positioners = Vec::with_capacity(count);
+    for (i, mut raw) in entries.into_iter().enumerate() {
         let section = Section {
             check,
             prefix: format!("probe[{i}]."),
         };
-        let name = section.name(raw.name)?;
+        let name = section.name(raw.name.take())?;
         if probes.iter().any(|p| p.name == name) {
             return Err(check.invalid(
                 &section.key("name"),
@@ -144,9 +198,13 @@ pub(super) fn probes(
                 "must differ from every earlier probe's name",
             ));
         }
-        probes.push(section.probe(name, raw.cantilever, raw.tracker)?);
+        positioners.push((section.key("daq"), raw.daq.take().unwrap_or_default()));
+        probes.push(section.probe(name, raw, (i, count))?);
     }
-    Ok(probes)
+    Ok(Probes {
+        probes,
+        positioners,
+    })
 }
 
 /// The sections of one probe, its keys spelt with `prefix`.
@@ -195,21 +253,40 @@ impl Section<'_> {
         Ok(name)
     }
 
+    /// Probe `k` of `count`.
     fn probe(
         &self,
         name: String,
-        cantilever: Option<RawCantilever>,
-        tracker: Option<RawTracker>,
+        raw: RawProbe,
+        (k, count): (usize, usize),
     ) -> Result<ProbeConfig, ConfigError> {
-        let cantilever = cantilever.map(|raw| self.cantilever(raw)).transpose()?;
-        let tracker = match tracker {
-            Some(raw) => self.tracker(raw)?,
+        let cantilever = raw.cantilever.map(|c| self.cantilever(c)).transpose()?;
+        let tracker = match raw.tracker {
+            Some(t) => self.tracker(t)?,
             None => TrackerConfig::default(),
+        };
+        let felt = match (raw.felt, cantilever) {
+            (Some(true), None) => {
+                return Err(self.invalid(
+                    "felt",
+                    true,
+                    "needs the probe's [cantilever]: without one it has no force to feel",
+                ))
+            }
+            (felt, cantilever) => felt.unwrap_or(cantilever.is_some()),
+        };
+        let pressing_force_sign = match raw.pressing_force_sign {
+            None => None,
+            Some(s) if s == 1.0 || s == -1.0 => Some(s),
+            Some(s) => return Err(self.invalid("pressing_force_sign", s, "must be 1 or -1")),
         };
         Ok(ProbeConfig {
             name,
             cantilever,
             tracker,
+            felt,
+            pressing_force_sign,
+            sim: SimProbe::validate(raw.sim, &self.prefix, k, count, self.check)?,
             prefix: self.prefix.clone(),
         })
     }

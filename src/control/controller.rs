@@ -114,6 +114,20 @@ impl Controller {
         self.gains = gains;
     }
 
+    /// The stylus feels and drives another probe from here on (`gains`: the teleoperation
+    /// with that probe's cantilever and pressing sign). Nothing known of the last probe's
+    /// force carries over: the sensed force fades out, the new probe's first accepted
+    /// estimate fades in, and motion stops until the stylus is back at the centre (the
+    /// deadman re-engage). Allocation-free, like a tick.
+    pub fn switch_probe(&mut self, gains: TeleopGains) {
+        self.set_gains(gains);
+        self.gate.restart(&self.gains.cantilever);
+        self.accepted = None;
+        self.missed = true;
+        self.last_seq = None;
+        self.fade();
+    }
+
     pub fn counters(&self) -> SafetyCounters {
         self.safety.counters()
     }

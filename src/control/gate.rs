@@ -120,6 +120,14 @@ impl Gate {
         }
     }
 
+    /// Judges another probe from here on (`cantilever`, its beam): nothing accepted of
+    /// the last one counts, and the first estimate fades in. The counts go on.
+    pub fn restart(&mut self, cantilever: &Cantilever) {
+        let counters = self.counters;
+        *self = Gate::new(self.limits.clone(), cantilever);
+        self.counters = counters;
+    }
+
     pub fn set_limits(&mut self, limits: GateLimits) {
         self.limits = limits;
     }

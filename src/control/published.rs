@@ -6,6 +6,8 @@ use crate::vision::Estimate;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Published {
+    /// Which probe of the view it is about: its place in the configuration's probes.
+    pub probe: usize,
     /// Increments with every published estimate; 0: nothing published yet.
     pub seq: u64,
     /// The frame's sequence number from its source.
@@ -20,6 +22,7 @@ pub struct Published {
 impl Default for Published {
     fn default() -> Self {
         Published {
+            probe: 0,
             seq: 0,
             frame_sequence: 0,
             frame_time_s: f64::NEG_INFINITY,

@@ -1,14 +1,19 @@
 //! The 1 kHz haptic loop: a dedicated, named thread on an absolute CLOCK_MONOTONIC
 //! schedule (SCHED_FIFO and locked memory when permitted). Each tick reads the stylus,
-//! runs the teleoperation law on the newest published estimate (never waiting for
-//! vision), writes the stylus force and sends the S100 rate command.
+//! runs the teleoperation law on the newest published estimate of the probe it feels
+//! (never waiting for vision), writes the stylus force and sends the S100 rate command
+//! to that probe's positioner; every other positioner is commanded to stand still.
+//!
+//! With several felt probes the stylus's [`SWITCH_BUTTON`] moves it to the next one
+//! ([`crate::control::Controller::switch_probe`]: the force fades, motion waits for the
+//! re-centred stylus).
 //!
 //! Nothing here allocates once the loop runs: the estimate arrives through a triple
 //! buffer, new gains and telemetry through wait-free rings, statistics go into
 //! preallocated histograms. Outputs are zeroed and forces switched off when the loop
 //! ends for any reason, panics included ([`Outputs`]'s `Drop`).
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use nalgebra::Vector3;
@@ -24,8 +29,9 @@ use crate::control::{
 };
 use crate::hw::clock::monotonic_ns;
 use crate::hw::daq::RateOutput;
-use crate::hw::haptic::HapticDevice;
+use crate::hw::haptic::{HapticDevice, SWITCH_BUTTON};
 use crate::hw::Clock;
+use crate::model::Cantilever;
 
 /// What the loop shares with the supervisor: counters to read, a flag to stop it.
 #[derive(Debug, Default)]
@@ -46,12 +52,21 @@ pub struct LoopShared {
     pub frame_delay_us: AtomicU64,
     /// Frames come too slowly for force feedback (a slow scan).
     pub slow_frames: AtomicBool,
+    /// The probe the stylus feels, by its place among the probes.
+    active_probe: AtomicUsize,
+    /// Times the stylus was switched to another probe.
+    pub switches: AtomicU64,
     state: AtomicU8,
     /// Set on a fault transition (rare: it may allocate), taken by the supervisor to log.
     pub last_fault: Mutex<Option<String>>,
 }
 
 impl LoopShared {
+    /// The probe the stylus feels and drives, by its place among the probes.
+    pub fn active_probe(&self) -> usize {
+        self.active_probe.load(Ordering::Relaxed)
+    }
+
     pub fn state(&self) -> SafetyState {
         match self.state.load(Ordering::Relaxed) {
             1 => SafetyState::Engaged,
@@ -91,19 +106,55 @@ pub struct LoopReport {
     pub realtime: bool,
 }
 
-/// The devices the loop drives; dropping it zeroes the stage and switches forces off.
+/// The devices the loop drives; dropping it zeroes every positioner and switches
+/// forces off.
 pub struct Outputs {
     pub haptic: Box<dyn HapticDevice>,
-    pub stage: Box<dyn RateOutput>,
+    /// One positioner per probe, in the probes' order.
+    pub stages: Vec<Box<dyn RateOutput>>,
     clock: Clock,
 }
 
 impl Drop for Outputs {
     fn drop(&mut self) {
         let now_s = self.clock.now_s();
-        let _ = self.stage.zero(now_s);
+        for stage in &mut self.stages {
+            let _ = stage.zero(now_s);
+        }
         let _ = self.haptic.write_force(Vector3::zeros());
         let _ = self.haptic.set_forces_enabled(false);
+    }
+}
+
+/// A probe the stylus can feel: its place among the probes and what it changes in the
+/// teleoperation gains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeltProbe {
+    pub probe: usize,
+    /// Its beam: the plausibility gate's spring constant and force sigmas; None:
+    /// `[teleop]`'s (the first probe's).
+    pub cantilever: Option<Cantilever>,
+    /// The sign of its tracked force while it presses; None: `[teleop]`'s.
+    pub pressing_force_sign: Option<f64>,
+}
+
+impl FeltProbe {
+    /// The lone probe of a view, felt with `[teleop]` as it is.
+    pub const SINGLE: FeltProbe = FeltProbe {
+        probe: 0,
+        cantilever: None,
+        pressing_force_sign: None,
+    };
+
+    /// `gains` while feeling this probe.
+    pub fn gains(&self, gains: TeleopGains) -> TeleopGains {
+        TeleopGains {
+            cantilever: self.cantilever.unwrap_or(gains.cantilever),
+            pressing_force_sign: self
+                .pressing_force_sign
+                .unwrap_or(gains.pressing_force_sign),
+            ..gains
+        }
     }
 }
 
@@ -111,7 +162,15 @@ impl Drop for Outputs {
 pub struct HapticLoop {
     pub controller: Controller,
     pub outputs: Outputs,
-    pub estimates: triple_buffer::Output<Published>,
+    /// Each probe's newest estimate, in the probes' order.
+    pub estimates: Vec<triple_buffer::Output<Published>>,
+    /// The probes the stylus can feel, in the order the switch visits them (at least
+    /// one); the first is felt at the start.
+    felt: Vec<FeltProbe>,
+    /// Which of `felt` is felt now.
+    active: usize,
+    /// `[teleop]` and `[safety]` as last loaded, before any probe's own values.
+    teleop: TeleopGains,
     pub gains: rtrb::Consumer<TeleopGains>,
     pub telemetry: rtrb::Producer<TickRecord>,
     pub shared: Arc<LoopShared>,
@@ -121,26 +180,39 @@ pub struct HapticLoop {
 }
 
 impl HapticLoop {
+    /// `stages` and `estimates`: one per probe, in order; `felt`: the probes the stylus
+    /// can feel (at least one; the first is felt at the start).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         gains: TeleopGains,
+        felt: Vec<FeltProbe>,
         haptic: Box<dyn HapticDevice>,
-        stage: Box<dyn RateOutput>,
+        stages: Vec<Box<dyn RateOutput>>,
         clock: Clock,
-        estimates: triple_buffer::Output<Published>,
+        estimates: Vec<triple_buffer::Output<Published>>,
         new_gains: rtrb::Consumer<TeleopGains>,
         telemetry: rtrb::Producer<TickRecord>,
         shared: Arc<LoopShared>,
         options: LoopOptions,
     ) -> Self {
+        assert!(!felt.is_empty(), "the stylus feels at least one probe");
+        assert!(
+            felt.iter()
+                .all(|f| f.probe < stages.len() && f.probe < estimates.len()),
+            "every felt probe has a positioner and an estimate"
+        );
+        shared.active_probe.store(felt[0].probe, Ordering::Relaxed);
         HapticLoop {
-            controller: Controller::new(gains),
+            controller: Controller::new(felt[0].gains(gains.clone())),
             outputs: Outputs {
                 haptic,
-                stage,
+                stages,
                 clock,
             },
             estimates,
+            felt,
+            active: 0,
+            teleop: gains,
             gains: new_gains,
             telemetry,
             shared,
@@ -218,7 +290,9 @@ impl HapticLoop {
                 self.shared.overruns.store(overruns, Ordering::Relaxed);
             }
             while let Ok(gains) = self.gains.pop() {
-                self.controller.set_gains(gains);
+                self.controller
+                    .set_gains(self.felt[self.active].gains(gains.clone()));
+                self.teleop = gains;
                 period_ns = self.period_ns();
             }
             self.tick(now_ns, period_us, ticks, &mut state);
@@ -249,7 +323,18 @@ impl HapticLoop {
                 None
             }
         };
-        let estimate = *self.estimates.read();
+        let pressed = haptic.map_or(0, |h| h.buttons & SWITCH_BUTTON);
+        if pressed != 0 && state.switch_held == 0 && self.felt.len() > 1 {
+            self.active = (self.active + 1) % self.felt.len();
+            let felt = self.felt[self.active];
+            self.controller
+                .switch_probe(felt.gains(self.teleop.clone()));
+            shared.active_probe.store(felt.probe, Ordering::Relaxed);
+            shared.switches.fetch_add(1, Ordering::Relaxed);
+        }
+        state.switch_held = pressed;
+        let probe = self.felt[self.active].probe;
+        let estimate = *self.estimates[probe].read();
         let out = self.controller.tick(&TickInput {
             now_s,
             haptic,
@@ -266,17 +351,29 @@ impl HapticLoop {
                 shared.note_fault(|| format!("haptic device: {e}"));
             }
         }
-        let stage = &mut self.outputs.stage;
-        state.daq_ok = match stage.write_velocity(now_s, out.stage_velocity_um_s) {
-            Ok(()) => true,
-            Err(e) => {
+        // The felt probe's positioner follows the stylus; the others stand still.
+        let mut daq_ok = true;
+        for (k, stage) in self.outputs.stages.iter_mut().enumerate() {
+            let velocity = if k == probe {
+                out.stage_velocity_um_s
+            } else {
+                Vector3::zeros()
+            };
+            if let Err(e) = stage.write_velocity(now_s, velocity) {
                 let _ = stage.zero(now_s);
-                if state.daq_ok {
+                if state.daq_ok && daq_ok {
                     shared.note_fault(|| format!("stage output: {e}; outputs set to zero"));
                 }
-                false
+                daq_ok = false;
             }
-        };
+        }
+        if !daq_ok {
+            // Every positioner stops with the one that failed.
+            for stage in &mut self.outputs.stages {
+                let _ = stage.zero(now_s);
+            }
+        }
+        state.daq_ok = daq_ok;
         shared.set_state(out.state);
         let counters = self.controller.counters();
         shared
@@ -333,6 +430,8 @@ impl HapticLoop {
 struct TickState {
     daq_ok: bool,
     forces_on: bool,
+    /// The switch button as last read (a switch on each press, not while held).
+    switch_held: u32,
 }
 
 impl Default for TickState {
@@ -340,6 +439,7 @@ impl Default for TickState {
         TickState {
             daq_ok: true,
             forces_on: false,
+            switch_held: 0,
         }
     }
 }

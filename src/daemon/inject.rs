@@ -114,9 +114,13 @@ pub struct PanickingEstimator {
 }
 
 impl Estimator for PanickingEstimator {
-    fn estimate(&mut self, frame: &GrayImage) -> Estimate {
+    fn probes(&self) -> usize {
+        self.inner.probes()
+    }
+
+    fn estimate(&mut self, frame: &GrayImage, estimates: &mut [Estimate]) {
         PanicInjection::check(Some(&self.injection), "tracker");
-        self.inner.estimate(frame)
+        self.inner.estimate(frame, estimates)
     }
 }
 

@@ -76,12 +76,14 @@ pub fn targets(state_dir: Option<&Path>, devices: &DevicesConfig) -> Vec<LockTar
             PipePath::Stdin => {}
         },
     }
-    if let DaqBackend::Comedi(c) = &devices.daq {
-        let mut seen: Vec<&PathBuf> = Vec::new();
-        for path in std::iter::once(&c.device).chain(c.axis_devices.iter()) {
-            if !seen.contains(&path) {
-                seen.push(path);
-                targets.push(node(format!("DAQ {}", path.display()), path));
+    let mut seen: Vec<&PathBuf> = Vec::new();
+    for positioner in &devices.positioners {
+        if let DaqBackend::Comedi(c) = &positioner.daq {
+            for path in std::iter::once(&c.device).chain(c.axis_devices.iter()) {
+                if !seen.contains(&path) {
+                    seen.push(path);
+                    targets.push(node(format!("DAQ {}", path.display()), path));
+                }
             }
         }
     }

@@ -1,10 +1,12 @@
 //! Opening the lab a configuration describes: each device from its backend (real ones
-//! through [`crate::hw::open`], `"sim"` ones from [`crate::sim::lab`]), and the tracker
+//! through [`crate::hw::open`], `"sim"` ones from [`crate::sim::lab`]): the frame
+//! source, each probe's positioner, the haptic device, and every probe's tracker
 //! calibrated on its reference frame. With the simulated SEM the reference frame and
-//! the clicks come from the simulator; otherwise from `[tracker.calibration]`.
+//! the clicks come from the simulator; otherwise from each `[tracker.calibration]`.
 use anyhow::Context;
 use image::GrayImage;
 
+use super::haptic_loop::FeltProbe;
 use super::{Devices, Estimator};
 use crate::config::{CalibrationConfig, Config, ProbeConfig, SINGLE_NAME};
 use crate::hw::config::FramesBackend;
@@ -14,56 +16,79 @@ use crate::hw::open as hw_open;
 use crate::hw::Clock;
 use crate::model::Cantilever;
 use crate::session::frames::load_gray;
+use crate::sim::config::SimProbe;
 use crate::sim::frames::SimSem;
 use crate::sim::lab as sim_lab;
 use crate::sim::sem::SemScene;
-use crate::vision::{Calibration, Estimate, Tracker};
+use crate::vision::{Calibration, Estimate, ProbeSet, Tracker};
 
-/// The vision tracker as the daemon's estimator.
-pub struct VisionEstimator(pub Tracker);
+// A frame carries truth for as many probes as the tracker follows in one view.
+const _: () = assert!(crate::hw::frames::MAX_TRUTHS == crate::vision::MAX_PROBES);
 
-impl Estimator for VisionEstimator {
-    fn estimate(&mut self, frame: &GrayImage) -> Estimate {
-        self.0.track(frame)
+/// The vision tracker of every probe in view as the daemon's estimator.
+pub struct VisionEstimator(pub ProbeSet);
+
+impl VisionEstimator {
+    /// One probe's tracker.
+    pub fn single(tracker: Tracker) -> Self {
+        VisionEstimator(ProbeSet::new(vec![tracker], &[()]))
     }
 }
 
-/// Opens every device of `config` and calibrates the tracker. A `"sim"` backend gets
+impl Estimator for VisionEstimator {
+    fn probes(&self) -> usize {
+        self.0.len()
+    }
+
+    fn estimate(&mut self, frame: &GrayImage, estimates: &mut [Estimate]) {
+        self.0.track(frame, estimates)
+    }
+}
+
+/// Opens every device of `config` and calibrates the trackers. A `"sim"` backend gets
 /// its simulated twin; a real one is opened through [`crate::hw::open`]. Fails with a
 /// message naming the device and why, before any motion can start: a backend not
 /// compiled in is found before any device is touched, and a device opened before a
 /// later one failed is closed again (its outputs at zero).
 pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
-    let probe = single_probe(config)?;
-    force_model(config, probe)?;
+    let felt = felt_probes(config)?;
     let devices = &config.devices;
     hw_open::check_compiled(devices)?;
-    // Real frames need the configured calibration: checked before touching a device.
-    let mut configured_tracker = match devices.frames {
+    // Real frames need the configured calibrations: checked before touching a device.
+    let mut configured = match devices.frames {
         FramesBackend::Sim => None,
-        _ => Some(tracker_from_config(config, probe)?),
+        _ => Some(probe_trackers(config)?),
     };
-    let (stage, snapshots): (Box<dyn RateOutput>, _) =
-        match hw_open::daq(&devices.daq).context("opening the DAQ ([daq])")? {
-            Some(daq) => (daq, None),
-            None => {
-                let (stage, snapshots) = sim_lab::stage(&config.sim);
-                (Box::new(stage), Some(snapshots))
+    let mut stages: Vec<Box<dyn RateOutput>> = Vec::with_capacity(config.probes.len());
+    let mut snapshots = Vec::with_capacity(config.probes.len());
+    for (probe, positioner) in config.probes.iter().zip(&devices.positioners) {
+        let opened = hw_open::daq(positioner)
+            .with_context(|| format!("opening the DAQ ([{}])", positioner.section))?;
+        match opened {
+            Some(daq) => {
+                stages.push(daq);
+                snapshots.push(None);
             }
-        };
-    let (frames, tracker): (Box<dyn FrameSource>, Tracker) =
+            None => {
+                let (stage, snapshot) = sim_lab::stage(&config.sim, &probe.sim, &config.teleop);
+                stages.push(Box::new(stage));
+                snapshots.push(Some(snapshot));
+            }
+        }
+    }
+    let (frames, trackers): (Box<dyn FrameSource>, ProbeSet) =
         match hw_open::frames(&devices.frames, clock)
             .context("opening the frame source ([frames])")?
         {
-            Some(frames) => match configured_tracker.take() {
-                Some(tracker) => (frames, tracker),
+            Some(frames) => match configured.take() {
+                Some(trackers) => (frames, trackers),
                 None => anyhow::bail!("no tracker for the configured frames"),
             },
             None => {
-                let scene = sim_scene(config, probe)?;
-                let tracker = sim_tracker(probe, &scene)?;
-                // Without the simulated stage the simulated probe hangs free.
-                (Box::new(SimSem::new(scene, snapshots, clock)), tracker)
+                let scene = sim_scene(config)?;
+                let trackers = sim_trackers(config, &scene)?;
+                // A probe on a real positioner hangs free in the simulated view.
+                (Box::new(SimSem::new(scene, snapshots, clock)), trackers)
             }
         };
     let haptic =
@@ -77,29 +102,62 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
     tracing::info!(
         "devices: frames {}, stage {}, haptic {}",
         frames.name(),
-        stage.name(),
+        stages
+            .iter()
+            .map(|s| s.name())
+            .collect::<Vec<_>>()
+            .join(" + "),
         haptic.name()
     );
+    if config.probes.len() > 1 {
+        tracing::info!(
+            "probes: {}; the stylus feels {} (its second button switches)",
+            names(config).join(", "),
+            felt.iter()
+                .map(|f| config.probes[f.probe].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     Ok(Devices {
         frames,
-        estimator: Box::new(VisionEstimator(tracker)),
-        stage,
+        estimator: Box::new(VisionEstimator(trackers)),
+        stages,
         haptic,
+        names: names(config),
+        felt,
     })
 }
 
-/// The one probe a run tracks and feels: a configuration with several `[[probe]]`
-/// entries is refused with the reason.
-pub fn single_probe(config: &Config) -> anyhow::Result<&ProbeConfig> {
-    match config.probes.as_slice() {
-        [probe] => Ok(probe),
-        probes => anyhow::bail!(
-            "{}: {} [[probe]] entries: `nanoforce run` tracks and feels one probe; `nanoforce \
-             replay` tracks several in one view (one results file per probe)",
-            config.path.display(),
-            probes.len()
-        ),
+fn names(config: &Config) -> Vec<String> {
+    config.probes.iter().map(|p| p.name.clone()).collect()
+}
+
+/// The probes the stylus can feel, in the configuration's order: at least one, or the
+/// run is refused with the reason.
+fn felt_probes(config: &Config) -> anyhow::Result<Vec<FeltProbe>> {
+    if let [probe] = config.probes.as_slice() {
+        force_model(config, probe)?;
     }
+    let felt: Vec<FeltProbe> = config
+        .probes
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.felt)
+        .map(|(k, p)| FeltProbe {
+            probe: k,
+            cantilever: p.cantilever,
+            pressing_force_sign: p.pressing_force_sign,
+        })
+        .collect();
+    if felt.is_empty() {
+        anyhow::bail!(
+            "{}: no [[probe]] entry is felt: `nanoforce run` renders a probe's force, which \
+             needs its [probe.cantilever] (and felt = true, the default with one)",
+            config.path.display()
+        );
+    }
+    Ok(felt)
 }
 
 /// The cantilever that turns the tip's bending into a force: a run renders that force,
@@ -116,41 +174,73 @@ fn force_model(config: &Config, probe: &ProbeConfig) -> anyhow::Result<Cantileve
     })
 }
 
-/// The simulated SEM of `config`'s `[sim]` sections (it bends the configured cantilever).
-fn sim_scene(config: &Config, probe: &ProbeConfig) -> anyhow::Result<SemScene> {
-    Ok(sim_lab::sem_scene(
-        &config.sim,
-        force_model(config, probe)?,
-        &config.teleop,
-    ))
+/// The simulated SEM of `config`'s `[sim]` sections: it bends each configured
+/// cantilever (a probe without one is drawn as the built-in lab's).
+fn sim_scene(config: &Config) -> anyhow::Result<SemScene> {
+    if let [probe] = config.probes.as_slice() {
+        force_model(config, probe)?;
+    }
+    let probes: Vec<(Cantilever, SimProbe)> = config
+        .probes
+        .iter()
+        .map(|p| {
+            (
+                p.cantilever.unwrap_or(config.teleop.cantilever),
+                p.sim.clone(),
+            )
+        })
+        .collect();
+    Ok(sim_lab::sem_scene(&config.sim, &probes, &config.teleop))
 }
 
-/// The tracker calibrated on the simulated SEM's reference frame and clicks.
-fn sim_tracker(probe: &ProbeConfig, scene: &SemScene) -> anyhow::Result<Tracker> {
-    let (reference, clicks) = scene.reference(probe.tracker.threshold, probe.tracker.window_deg);
-    let calibration = calibrate(probe, &reference, &clicks)?;
-    Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
+/// The trackers calibrated on the simulated SEM's reference frame and clicks.
+fn sim_trackers(config: &Config, scene: &SemScene) -> anyhow::Result<ProbeSet> {
+    let first = &config.probes[0].tracker;
+    let (reference, clicks) = scene.references(first.threshold, first.window_deg);
+    let trackers = config
+        .probes
+        .iter()
+        .zip(&clicks)
+        .map(|(probe, clicks)| {
+            let calibration = calibrate(probe, &reference, clicks)?;
+            Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
+        })
+        .collect::<anyhow::Result<Vec<Tracker>>>()?;
+    // One reference frame: the probes are seen at one scale.
+    let references = vec![(); trackers.len()];
+    Ok(ProbeSet::new(trackers, &references))
 }
 
-/// The tracker a live run of `config` uses: calibrated on the simulated SEM's reference
-/// with `[frames] backend = "sim"`, else on `[tracker.calibration]`. Replaying a
-/// recorded session with it tracks its frames as the run did.
-pub fn live_tracker(config: &Config) -> anyhow::Result<Tracker> {
-    let probe = single_probe(config)?;
+/// The trackers a live run of `config` uses: calibrated on the simulated SEM's
+/// reference with `[frames] backend = "sim"`, else on each `[tracker.calibration]`.
+/// Replaying a recorded session with them tracks its frames as the run did.
+pub fn live_trackers(config: &Config) -> anyhow::Result<ProbeSet> {
     match config.devices.frames {
-        FramesBackend::Sim => sim_tracker(probe, &sim_scene(config, probe)?),
-        _ => tracker_from_config(config, probe),
+        FramesBackend::Sim => sim_trackers(config, &sim_scene(config)?),
+        _ => probe_trackers(config),
     }
 }
 
 /// The trackers of every probe of `config`, in its order, each calibrated on its
-/// `[tracker.calibration]` (replaying frames from a real SEM).
-pub fn probe_trackers(config: &Config) -> anyhow::Result<Vec<Tracker>> {
-    config
+/// `[tracker.calibration]` (frames from a real SEM); probes calibrated on one reference
+/// image are seen at one scale.
+pub fn probe_trackers(config: &Config) -> anyhow::Result<ProbeSet> {
+    let trackers = config
         .probes
         .iter()
         .map(|probe| tracker_from_config(config, probe))
-        .collect()
+        .collect::<anyhow::Result<Vec<Tracker>>>()?;
+    let references: Vec<Option<&std::path::Path>> = config
+        .probes
+        .iter()
+        .map(|p| {
+            p.tracker
+                .calibration
+                .as_ref()
+                .map(|c| c.reference_image.as_path())
+        })
+        .collect();
+    Ok(ProbeSet::new(trackers, &references))
 }
 
 /// The tracker of one probe of `config`, calibrated on its `[tracker.calibration]`

@@ -3,11 +3,11 @@
 //! - `frames`: blocks on the [`FrameSource`] and drops each frame into a triple buffer.
 //!   A frame the tracker has not taken yet is overwritten and counted as dropped, so a
 //!   slow tracker never queues latency.
-//! - `tracker`: takes the newest frame, runs the [`Estimator`] on it and publishes the
-//!   estimate whole, stamped with its frame ([`Published`]), into the triple buffer the
-//!   haptic loop reads and the rings of the stream, the monitor and telemetry, then
-//!   hands the frame to the session's frame recorder (a copy into a bounded queue,
-//!   never a wait).
+//! - `tracker`: takes the newest frame, runs the [`Estimator`] on it (every probe in
+//!   view) and publishes each probe's estimate whole, stamped with its frame and probe
+//!   ([`Published`]), into that probe's triple buffer, which the haptic loop reads, and
+//!   the rings of the stream, the monitor and telemetry, then hands the frame to the
+//!   session's frame recorder (a copy into a bounded queue, never a wait).
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
@@ -20,13 +20,20 @@ use super::snapshot::SnapshotTap;
 use super::stats::{ForceErrors, Histogram};
 use super::stream::EstimateTap;
 use crate::control::Published;
-use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
+use crate::hw::frames::{FrameError, FrameMeta, FrameSource, NO_TRUTH};
 use crate::hw::Clock;
 use crate::vision::Estimate;
 
-/// Turns a frame into an estimate (the vision tracker, or a test double).
+/// Turns a frame into an estimate of each probe in view (the vision tracker, or a test
+/// double).
 pub trait Estimator: Send {
-    fn estimate(&mut self, frame: &GrayImage) -> Estimate;
+    /// How many probes it tracks (at least one).
+    fn probes(&self) -> usize {
+        1
+    }
+
+    /// Tracks every probe in `frame`: `estimates` holds one per probe, in order.
+    fn estimate(&mut self, frame: &GrayImage, estimates: &mut [Estimate]);
 }
 
 /// A frame in the slot, with when it became available to the tracker.
@@ -44,7 +51,7 @@ impl Default for TimedFrame {
             meta: FrameMeta {
                 sequence: 0,
                 captured_s: 0.0,
-                truth: None,
+                truth: NO_TRUTH,
             },
             available_s: 0.0,
         }
@@ -62,6 +69,7 @@ pub struct PipelineShared {
     pub source_dropped: AtomicU64,
     pub source_errors: AtomicU64,
     pub tracked: AtomicU64,
+    /// Frames in which the first probe was detected.
     pub detected: AtomicU64,
     /// The source said it has no more frames (a finite recording or a closed pipe).
     pub source_ended: AtomicBool,
@@ -88,6 +96,15 @@ pub struct EstimateRecord {
 #[derive(Debug, Clone)]
 pub struct TrackerReport {
     pub latency_ms: Histogram,
+    /// Each probe's, in order.
+    pub probes: Vec<ProbeReport>,
+}
+
+/// What the tracker measured of one probe.
+#[derive(Debug, Clone, Default)]
+pub struct ProbeReport {
+    /// Frames in which it was detected.
+    pub detected: u64,
     /// Only when frames carry ground truth (the simulated lab).
     pub force: Option<ForceErrors>,
 }
@@ -138,7 +155,8 @@ pub fn spawn_frames(
 /// The tracker thread's ends of the slots.
 pub struct TrackerSide {
     pub frames: triple_buffer::Output<TimedFrame>,
-    pub estimates: triple_buffer::Input<Published>,
+    /// One latest-only slot per probe, in order.
+    pub estimates: Vec<triple_buffer::Input<Published>>,
     pub telemetry: rtrb::Producer<EstimateRecord>,
     /// Copies for the monitor and thumbnails (see [`super::snapshot`]), when wanted.
     pub snapshots: Option<SnapshotTap>,
@@ -156,7 +174,10 @@ pub fn run_tracker(
     shared: Arc<PipelineShared>,
 ) -> TrackerReport {
     let mut latency_ms = Histogram::new(0.01, 1000.0);
-    let mut force: Option<ForceErrors> = None;
+    let count = estimator.probes();
+    let mut probes = vec![ProbeReport::default(); count];
+    let mut estimates = vec![Estimate::default(); count];
+    let mut published = vec![Published::default(); count];
     let mut seq = 0u64;
     while !shared.stop.load(Ordering::Relaxed) {
         if !side.frames.update() {
@@ -165,33 +186,26 @@ pub fn run_tracker(
         }
         let frame = side.frames.output_buffer_mut();
         let started_s = clock.now_s();
-        let estimate = estimator.estimate(&frame.image);
+        estimator.estimate(&frame.image, &mut estimates);
         let published_s = clock.now_s();
         seq += 1;
-        let published = Published {
-            seq,
-            frame_sequence: frame.meta.sequence,
-            frame_time_s: frame.meta.captured_s,
-            published_s,
-            estimate,
-        };
-        side.estimates.write(published);
-        if let Some(stream) = side.stream.as_mut() {
-            stream.offer(&published);
+        for (k, (slot, &estimate)) in published.iter_mut().zip(&estimates).enumerate() {
+            *slot = Published {
+                probe: k,
+                seq,
+                frame_sequence: frame.meta.sequence,
+                frame_time_s: frame.meta.captured_s,
+                published_s,
+                estimate,
+            };
+        }
+        for (slot, p) in side.estimates.iter_mut().zip(&published) {
+            slot.write(*p);
         }
         latency_ms.record((published_s - frame.available_s) * 1e3);
         shared.tracked.fetch_add(1, Ordering::Relaxed);
-        if estimate.detected {
+        if estimates[0].detected {
             shared.detected.fetch_add(1, Ordering::Relaxed);
-        }
-        let felt = estimate.felt_force_nn();
-        let truth = frame.meta.truth.filter(|t| t.probe_in_view);
-        if let Some(truth) = truth {
-            let errors = force.get_or_insert_with(ForceErrors::default);
-            errors.record_truth(truth.force_nn);
-            if let Some(force_nn) = felt {
-                errors.record_error(force_nn, truth.force_nn);
-            }
         }
         if let Some(tap) = side.snapshots.as_mut() {
             tap.offer(published_s, &frame.image, &published);
@@ -199,11 +213,27 @@ pub fn run_tracker(
         if let Some(tap) = side.recording.as_mut() {
             tap.offer(&frame.image, &frame.meta);
         }
-        let _ = side.telemetry.push(EstimateRecord {
-            estimate: published,
-            processing_ms: (published_s - started_s) * 1e3,
-            true_force_nn: truth.map(|t| t.force_nn),
-        });
+        for ((p, report), truth) in published.iter().zip(&mut probes).zip(frame.meta.truth) {
+            if let Some(stream) = side.stream.as_mut() {
+                stream.offer(p);
+            }
+            if p.estimate.detected {
+                report.detected += 1;
+            }
+            let truth = truth.filter(|t| t.probe_in_view);
+            if let Some(truth) = truth {
+                let errors = report.force.get_or_insert_with(ForceErrors::default);
+                errors.record_truth(truth.force_nn);
+                if let Some(force_nn) = p.estimate.felt_force_nn() {
+                    errors.record_error(force_nn, truth.force_nn);
+                }
+            }
+            let _ = side.telemetry.push(EstimateRecord {
+                estimate: *p,
+                processing_ms: (published_s - started_s) * 1e3,
+                true_force_nn: truth.map(|t| t.force_nn),
+            });
+        }
     }
-    TrackerReport { latency_ms, force }
+    TrackerReport { latency_ms, probes }
 }

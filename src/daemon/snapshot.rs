@@ -9,23 +9,39 @@
 use image::GrayImage;
 
 use crate::control::Published;
+use crate::vision::{Estimate, MAX_PROBES};
 
 /// Ring size: ten seconds of estimates at 100 frames per second.
 const ESTIMATE_RING: usize = 1024;
 
-/// One frame as the tracker saw it, with its estimate (edges included).
+/// One frame as the tracker saw it, with each probe's estimate (edges included).
 #[derive(Debug, Clone)]
 pub struct FrameSnapshot {
     pub image: GrayImage,
-    pub estimate: Published,
+    /// The first `probes` hold the estimates, in the probes' order.
+    estimates: [Published; MAX_PROBES],
+    probes: usize,
 }
 
 impl Default for FrameSnapshot {
     fn default() -> Self {
         FrameSnapshot {
             image: GrayImage::new(0, 0),
-            estimate: Published::default(),
+            estimates: [Published::default(); MAX_PROBES],
+            probes: 0,
         }
+    }
+}
+
+impl FrameSnapshot {
+    /// Each probe's estimate, in order.
+    pub fn estimates(&self) -> &[Published] {
+        &self.estimates[..self.probes]
+    }
+
+    /// Each probe's tracker estimate, in order (for drawing).
+    pub fn tracked(&self) -> impl Iterator<Item = Estimate> + '_ {
+        self.estimates().iter().map(|p| p.estimate)
     }
 }
 
@@ -63,8 +79,11 @@ pub fn snapshot_channel(frame_hz: f64) -> (SnapshotTap, SnapshotReader) {
 impl SnapshotTap {
     /// Offers one tracked frame at `now_s`; never blocks, allocates only when the frame
     /// size changes.
-    pub fn offer(&mut self, now_s: f64, image: &GrayImage, estimate: &Published) {
-        let _ = self.estimates.push(*estimate);
+    /// `estimates`: each probe's, in order (at most [`MAX_PROBES`]).
+    pub fn offer(&mut self, now_s: f64, image: &GrayImage, estimates: &[Published]) {
+        for estimate in estimates {
+            let _ = self.estimates.push(*estimate);
+        }
         if now_s < self.next_s {
             return;
         }
@@ -76,7 +95,9 @@ impl SnapshotTap {
         };
         let slot = self.frames.input_buffer_mut();
         copy_frame(&mut slot.image, image);
-        slot.estimate = *estimate;
+        let probes = estimates.len().min(MAX_PROBES);
+        slot.estimates[..probes].copy_from_slice(&estimates[..probes]);
+        slot.probes = probes;
         self.frames.publish();
     }
 }
@@ -111,7 +132,7 @@ mod tests {
                 ..Published::default()
             };
             e.estimate.edges[0] = Some(edge);
-            tap.offer(k as f64 / 60.0, &image, &e);
+            tap.offer(k as f64 / 60.0, &image, &[e]);
             if k == 0 {
                 assert!(reader.frames.update(), "the first frame is copied at once");
                 assert_eq!(
@@ -128,9 +149,9 @@ mod tests {
         assert!(reader.frames.update());
         let last = reader.frames.output_buffer_mut();
         // 30 frames at 60 Hz = 0.5 s: copies at 0, 0.2 and 0.4 s (frame 24).
-        assert_eq!(last.estimate.seq, 25);
+        assert_eq!(last.estimates()[0].seq, 25);
         assert_eq!(last.image.get_pixel(0, 0)[0], 24);
-        assert_eq!(last.estimate.estimate.edges, [Some(edge), None, None]);
+        assert_eq!(last.estimates()[0].estimate.edges, [Some(edge), None, None]);
     }
 
     #[test]
@@ -138,7 +159,7 @@ mod tests {
         let (mut tap, reader) = snapshot_channel(1.0);
         let image = GrayImage::new(2, 2);
         for _ in 0..ESTIMATE_RING + 10 {
-            tap.offer(0.0, &image, &Published::default());
+            tap.offer(0.0, &image, &[Published::default()]);
         }
         assert_eq!(reader.estimates.slots(), ESTIMATE_RING);
     }

@@ -112,6 +112,24 @@ pub struct RunStats {
     pub recording: RecordingStats,
     /// The live data stream's datagrams (`[stream]`); null when it is off.
     pub stream: Option<StreamStats>,
+    /// Each probe in view, in the configuration's order. `frames.detected` and `force`
+    /// above are the first probe's.
+    pub probes: Vec<ProbeStats>,
+}
+
+/// One probe of the run.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ProbeStats {
+    pub name: String,
+    pub frames: ProbeFrames,
+    /// Its felt force against the simulator's truth (null outside the simulated lab).
+    pub force: ForceStats,
+}
+
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct ProbeFrames {
+    /// Frames it was detected in.
+    pub detected: u64,
 }
 
 /// How the run ended.
@@ -322,6 +340,11 @@ mod tests {
                 estimates_dropped: 1,
                 ..StreamStats::default()
             }),
+            probes: vec![ProbeStats {
+                name: "left".into(),
+                frames: ProbeFrames { detected: 59 },
+                force: ForceStats::from_errors(None),
+            }],
         };
         let json = serde_json::to_value(&stats).unwrap();
         assert_eq!(json["haptic_loop"]["period_us_p99"], 1010.5);
@@ -335,6 +358,9 @@ mod tests {
         assert_eq!(json["stream"]["send_errors"], 0);
         assert_eq!(json["recording"]["frames_dropped"], 3);
         assert_eq!(json["recording"]["frames_MB"], 36.9);
+        assert_eq!(json["probes"][0]["name"], "left");
+        assert_eq!(json["probes"][0]["frames"]["detected"], 59);
+        assert!(json["probes"][0]["force"]["rms_error_nN"].is_null());
     }
 
     #[test]

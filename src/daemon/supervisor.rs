@@ -11,7 +11,7 @@ use anyhow::Context;
 use tokio::sync::mpsc as async_mpsc;
 
 use super::frame_record::{FrameRecorder, FrameWriter, FRAMES_SHARE};
-use super::haptic_loop::{GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
+use super::haptic_loop::{FeltProbe, GateLog, HapticLoop, LoopOptions, LoopReport, LoopShared};
 use super::inject::{PanicInjection, PanickingEstimator, PanickingFrames, PanickingHaptic};
 use super::monitor::{self, DaemonView, MonitorConfig, MonitorHandle};
 use super::notify::Notifier;
@@ -19,8 +19,8 @@ use super::pipeline::{self, Estimator, PipelineShared, TimedFrame, TrackerReport
 use super::recording::RecordingStatus;
 use super::snapshot::snapshot_channel;
 use super::stats::{
-    ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, RecordingStats, RunStats,
-    SafetyStats, StopStats,
+    ForceStats, FrameStats, LoopStats, MemoryStats, MemoryWatch, ProbeFrames, ProbeStats,
+    RecordingStats, RunStats, SafetyStats, StopStats,
 };
 use super::stream::{self, StreamConfig, StreamHandle, StreamShared};
 use super::supervisor_health::Health;
@@ -33,13 +33,39 @@ use crate::hw::frames::FrameSource;
 use crate::hw::haptic::HapticDevice;
 use crate::hw::Clock;
 use crate::session::utc::UtcAnchor;
+use crate::vision::SINGLE_NAME;
 
 /// The opened devices and the tracker, ready to run.
 pub struct Devices {
     pub frames: Box<dyn FrameSource>,
+    /// Tracks every probe in view.
     pub estimator: Box<dyn Estimator>,
-    pub stage: Box<dyn RateOutput>,
+    /// Each probe's positioner, in the probes' order.
+    pub stages: Vec<Box<dyn RateOutput>>,
     pub haptic: Box<dyn HapticDevice>,
+    /// Each probe's name, in order.
+    pub names: Vec<String>,
+    /// The probes the stylus can feel, in switching order (the first at the start).
+    pub felt: Vec<FeltProbe>,
+}
+
+impl Devices {
+    /// One probe, on `stage`, felt with `[teleop]` as it is.
+    pub fn one_probe(
+        frames: Box<dyn FrameSource>,
+        estimator: Box<dyn Estimator>,
+        stage: Box<dyn RateOutput>,
+        haptic: Box<dyn HapticDevice>,
+    ) -> Devices {
+        Devices {
+            frames,
+            estimator,
+            stages: vec![stage],
+            haptic,
+            names: vec![SINGLE_NAME.to_string()],
+            felt: vec![FeltProbe::SINGLE],
+        }
+    }
 }
 
 /// How to run.
@@ -225,6 +251,8 @@ struct Threads {
     pipeline_shared: Arc<PipelineShared>,
     /// Set once the haptic loop has ended (its outputs zeroed, forces off).
     outputs_zeroed: Arc<AtomicBool>,
+    /// The probes' names, in order.
+    probe_names: Vec<String>,
     session_dir: Option<PathBuf>,
 }
 
@@ -418,6 +446,7 @@ impl Daemon {
                         .context("starting the supervisor's runtime")?;
                     let started = Instant::now();
                     let zeroed = threads.outputs_zeroed.clone();
+                    let probe_names = threads.probe_names.clone();
                     let run = std::panic::AssertUnwindSafe(|| {
                         runtime.block_on(supervise(
                             options,
@@ -439,6 +468,7 @@ impl Daemon {
                                 None,
                                 &pipeline_shared,
                                 &loop_shared,
+                                &probe_names,
                             );
                             stats.stop = StopStats {
                                 reason: exit.describe(),
@@ -476,8 +506,13 @@ fn spawn_threads(
     recording: Arc<RecordingStatus>,
 ) -> anyhow::Result<Threads> {
     let devices = inject_panics(devices, options.inject.as_ref());
+    let probe_names = devices.names.clone();
     let (frames_in, frames_out) = triple_buffer::triple_buffer(&TimedFrame::default());
-    let (estimates_in, estimates_out) = triple_buffer::triple_buffer(&Published::default());
+    let (estimates_in, estimates_out): (Vec<_>, Vec<_>) = devices
+        .stages
+        .iter()
+        .map(|_| triple_buffer::triple_buffer(&Published::default()))
+        .unzip();
     let (ticks_tx, ticks_rx) = rtrb::RingBuffer::new(TICK_RING);
     let (est_tx, est_rx) = rtrb::RingBuffer::new(ESTIMATE_RING);
     let (gains_tx, gains_rx) = rtrb::RingBuffer::new(4);
@@ -508,6 +543,7 @@ fn spawn_threads(
                 recording: recording.clone(),
                 stream: stream.as_ref().map(|s| s.shared.clone()),
                 inject: options.inject.clone(),
+                probe_names: devices.names.clone(),
             };
             let handle = monitor::start(config, reader, view, options.session_dir.clone())
                 .context("starting the monitor")?;
@@ -541,6 +577,7 @@ fn spawn_threads(
                 records_frames: frame_recorder.is_some(),
                 config_file: options.config_file.clone(),
                 pixel_origin: options.pixel_origin,
+                probe_names: probe_names.clone(),
                 ticks: ticks_rx,
                 estimates: est_rx,
                 events: events_rx,
@@ -584,8 +621,9 @@ fn spawn_threads(
     let shared_for_threads = loop_shared.clone();
     let mut haptic_loop = HapticLoop::new(
         gains,
+        devices.felt,
         devices.haptic,
-        devices.stage,
+        devices.stages,
         clock,
         estimates_out,
         gains_rx,
@@ -611,6 +649,7 @@ fn spawn_threads(
         pipeline_shared: pipeline_for_threads,
         outputs_zeroed,
         session_dir: options.session_dir.clone(),
+        probe_names,
     })
 }
 
@@ -622,8 +661,10 @@ fn inject_panics(devices: Devices, inject: Option<&PanicInjection>) -> Devices {
     let Devices {
         mut frames,
         mut estimator,
-        stage,
+        stages,
         mut haptic,
+        names,
+        felt,
     } = devices;
     match injection.thread {
         "frames" => {
@@ -649,8 +690,10 @@ fn inject_panics(devices: Devices, inject: Option<&PanicInjection>) -> Devices {
     Devices {
         frames,
         estimator,
-        stage,
+        stages,
         haptic,
+        names,
+        felt,
     }
 }
 
@@ -738,6 +781,7 @@ async fn supervise(
         tracker_report.as_ref(),
         &pipeline_shared,
         &loop_shared,
+        &threads.probe_names,
     );
     stats.memory = memory.stats();
     stats.stop = StopStats {
@@ -851,13 +895,16 @@ fn dead_thread(threads: &Threads) -> Option<String> {
     None
 }
 
+/// `names`: the probes', in order.
 fn assemble_stats(
     duration_s: f64,
     loop_report: Option<&LoopReport>,
     tracker: Option<&TrackerReport>,
     pipeline: &PipelineShared,
     loop_shared: &LoopShared,
+    names: &[String],
 ) -> RunStats {
+    let probe = |k: usize| tracker.and_then(|t| t.probes.get(k));
     let ticks = loop_report.map_or(0, |r| r.ticks);
     let periods = loop_report.map(|r| &r.periods_us);
     let latency = tracker.map(|t| &t.latency_ms);
@@ -880,7 +927,7 @@ fn assemble_stats(
             latency_ms_p50: latency.and_then(|h| h.quantile(0.5)),
             latency_ms_p99: latency.and_then(|h| h.quantile(0.99)),
         },
-        force: ForceStats::from_errors(tracker.and_then(|t| t.force.as_ref())),
+        force: ForceStats::from_errors(probe(0).and_then(|p| p.force.as_ref())),
         safety: SafetyStats {
             stale_events: loop_report.map_or_else(
                 || loop_shared.stale_events.load(Ordering::Relaxed),
@@ -903,6 +950,17 @@ fn assemble_stats(
         stop: StopStats::default(),
         recording: RecordingStats::default(),
         stream: None,
+        probes: names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| ProbeStats {
+                name: name.clone(),
+                frames: ProbeFrames {
+                    detected: probe(k).map_or(0, |p| p.detected),
+                },
+                force: ForceStats::from_errors(probe(k).and_then(|p| p.force.as_ref())),
+            })
+            .collect(),
     }
 }
 

@@ -6,7 +6,8 @@
 //! A session folder holds `config.toml` (the configuration the run used),
 //! `session.json` (the UTC time of t = 0, see [`UtcAnchor`]), `ticks.csv` (the haptic
 //! loop, decimated), `estimates.csv` (one row per tracked frame, in the one estimate
-//! schema of a replay's CSV: [`crate::session::results`]), `events.log` (faults and
+//! schema of a replay's CSV: [`crate::session::results`]; with several probes one file
+//! per probe, `estimates.<name>.csv`), `events.log` (faults and
 //! state changes, written as they happen) and `frames.nfrm` (the frames the tracker
 //! saw, written by [`super::frame_record`]). Both CSVs have a `utc` column: the row's
 //! time (`t_s`, `frame_time_s`) in UTC.
@@ -89,6 +90,9 @@ pub struct Budget {
 }
 
 /// How often the writer flushes its files: a crash loses at most this much telemetry.
+/// The estimates of a lone probe; with several, each probe's is named after it.
+pub const ESTIMATES_FILE: &str = "estimates.csv";
+
 const FLUSH_EVERY: Duration = Duration::from_millis(500);
 /// How often a running session checks the recordings against the budget.
 const BUDGET_EVERY: Duration = Duration::from_secs(10);
@@ -104,6 +108,8 @@ pub struct Recorder {
     pub config_file: Option<PathBuf>,
     /// `tracker.pixel_origin`: where the apex columns count from.
     pub pixel_origin: PixelOrigin,
+    /// The probes' names, in order (each has its estimates file).
+    pub probe_names: Vec<String>,
     pub ticks: rtrb::Consumer<TickRecord>,
     pub estimates: rtrb::Consumer<EstimateRecord>,
     pub events: std::sync::mpsc::Receiver<String>,
@@ -116,12 +122,13 @@ pub struct Recorder {
 /// The session's open files.
 struct Files {
     ticks: BufWriter<File>,
-    estimates: BufWriter<File>,
+    /// Each probe's, in order.
+    estimates: Vec<BufWriter<File>>,
     events: BufWriter<File>,
 }
 
 impl Files {
-    fn create(dir: &Path, info: &SessionInfo) -> io::Result<Files> {
+    fn create(dir: &Path, info: &SessionInfo, probe_names: &[String]) -> io::Result<Files> {
         let named = |path: &Path, e: io::Error| {
             io::Error::new(e.kind(), format!("{}: {e}", path.display()))
         };
@@ -136,9 +143,13 @@ impl Files {
             .map_err(io::Error::other)
             .and_then(|json| fs::write(&session_json, json + "\n"))
             .map_err(|e| named(&session_json, e))?;
+        let names: Vec<&str> = probe_names.iter().map(String::as_str).collect();
         let mut files = Files {
             ticks: open("ticks.csv")?,
-            estimates: open("estimates.csv")?,
+            estimates: results::per_probe(Path::new(ESTIMATES_FILE), &names)
+                .iter()
+                .map(|(_, path)| open(&path.to_string_lossy()))
+                .collect::<io::Result<_>>()?,
             events: open("events.log")?,
         };
         writeln!(
@@ -147,7 +158,9 @@ impl Files {
              vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
              gate_attenuated,utc"
         )?;
-        writeln!(files.estimates, "{}", results::header())?;
+        for estimates in &mut files.estimates {
+            writeln!(estimates, "{}", results::header())?;
+        }
         writeln!(
             files.events,
             "session start: t = 0 s is {} UTC (CLOCK_MONOTONIC {:.9} s)",
@@ -160,7 +173,9 @@ impl Files {
 
     fn flush(&mut self) -> io::Result<()> {
         self.ticks.flush()?;
-        self.estimates.flush()?;
+        for estimates in &mut self.estimates {
+            estimates.flush()?;
+        }
         self.events.flush()
     }
 }
@@ -189,7 +204,7 @@ fn record(mut recorder: Recorder, stop: &AtomicBool) -> io::Result<()> {
         frames_file,
         recorder.config_file.as_deref(),
     );
-    let mut files = match Files::create(&recorder.dir, &info) {
+    let mut files = match Files::create(&recorder.dir, &info, &recorder.probe_names) {
         Ok(files) => Some(files),
         Err(e) => {
             fail(e);
@@ -245,12 +260,10 @@ fn drain(recorder: &mut Recorder, files: &mut Files) -> io::Result<()> {
         write_tick(&mut files.ticks, &r, &recorder.anchor)?;
     }
     while let Ok(r) = recorder.estimates.pop() {
-        write_estimate(
-            &mut files.estimates,
-            &r,
-            recorder.pixel_origin,
-            &recorder.anchor,
-        )?;
+        let Some(out) = files.estimates.get_mut(r.estimate.probe) else {
+            continue;
+        };
+        write_estimate(out, &r, recorder.pixel_origin, &recorder.anchor)?;
     }
     let mut wrote_event = false;
     while let Ok(line) = recorder.events.try_recv() {
@@ -441,6 +454,7 @@ mod tests {
     fn apex_columns_follow_the_pixel_origin() {
         let record = |detected: bool| EstimateRecord {
             estimate: crate::control::Published {
+                probe: 0,
                 seq: 7,
                 frame_sequence: 9,
                 frame_time_s: 1.0,

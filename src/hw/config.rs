@@ -12,7 +12,6 @@
 //! in is checked when the devices are opened ([`super::open::check_compiled`]), so a
 //! configuration can be checked anywhere.
 pub use super::daq::config::DaqBackend;
-use super::daq::config::RawDaq;
 pub use super::frames::config::FramesBackend;
 use super::frames::config::RawFrames;
 pub use super::haptic::config::HapticBackend;
@@ -26,15 +25,28 @@ pub(crate) type RawDevice = toml::Table;
 #[derive(Debug, Clone, PartialEq)]
 pub struct DevicesConfig {
     pub frames: FramesBackend,
-    pub daq: DaqBackend,
+    /// The S100 positioners, one per probe in view (the probe's order): the DAQ
+    /// outputs that drive each.
+    pub positioners: Vec<Positioner>,
     pub haptic: HapticBackend,
+}
+
+/// One S100 positioner and the DAQ outputs that drive it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Positioner {
+    /// The section it was read from, as messages name it: `daq`, or `probe[i].daq`.
+    pub section: String,
+    pub daq: DaqBackend,
 }
 
 impl Default for DevicesConfig {
     fn default() -> Self {
         DevicesConfig {
             frames: FramesBackend::Sim,
-            daq: DaqBackend::Sim,
+            positioners: vec![Positioner {
+                section: "daq".into(),
+                daq: DaqBackend::Sim,
+            }],
             haptic: HapticBackend::Sim,
         }
     }
@@ -43,21 +55,31 @@ impl Default for DevicesConfig {
 impl DevicesConfig {
     /// True when every device is simulated (the built-in lab).
     pub fn all_simulated(&self) -> bool {
-        *self == DevicesConfig::default()
+        self.frames == FramesBackend::Sim
+            && self.haptic == HapticBackend::Sim
+            && self.positioners.iter().all(|p| p.daq == DaqBackend::Sim)
     }
 
+    /// `positioners`: each probe's DAQ section as written, with its section name.
     pub(crate) fn validate(
         frames: RawDevice,
-        daq: RawDevice,
+        positioners: Vec<(String, RawDevice)>,
         haptic: RawDevice,
         check: &Checker,
     ) -> Result<DevicesConfig, ConfigError> {
         let frames: RawFrames = tagged(check, "frames", "backend", Some("sim"), frames)?;
-        let daq: RawDaq = tagged(check, "daq", "backend", Some("sim"), daq)?;
         let haptic: RawHaptic = tagged(check, "haptic", "backend", Some("sim"), haptic)?;
         Ok(DevicesConfig {
             frames: frames.validate(check)?,
-            daq: daq.validate(check)?,
+            positioners: positioners
+                .into_iter()
+                .map(|(section, table)| {
+                    Ok(Positioner {
+                        daq: DaqBackend::validate(check, &section, table)?,
+                        section,
+                    })
+                })
+                .collect::<Result<_, ConfigError>>()?,
             haptic: haptic.validate(check)?,
         })
     }

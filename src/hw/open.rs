@@ -3,7 +3,7 @@
 //! simulated lab). A backend whose cargo feature is not compiled in is an error that
 //! says which build it needs, never a panic; [`check_compiled`] finds that before any
 //! device is touched.
-use super::config::{DaqBackend, DevicesConfig, FramesBackend, HapticBackend};
+use super::config::{DaqBackend, DevicesConfig, FramesBackend, HapticBackend, Positioner};
 use super::daq::{DaqError, RateOutput};
 use super::frames::{pipe::PipeSource, FrameError, FrameSource};
 use super::haptic::{HapticDevice, HapticError};
@@ -14,7 +14,7 @@ use super::Clock;
 pub enum OpenError {
     #[error("{section}.backend = {backend:?} needs a build with --features {feature} (this build has: {compiled})")]
     NotCompiled {
-        section: &'static str,
+        section: String,
         backend: &'static str,
         feature: &'static str,
         compiled: String,
@@ -41,10 +41,10 @@ pub fn compiled_features() -> Vec<&'static str> {
         .collect()
 }
 
-fn not_compiled(section: &'static str, backend: &'static str, feature: &'static str) -> OpenError {
+fn not_compiled(section: &str, backend: &'static str, feature: &'static str) -> OpenError {
     let compiled = compiled_features();
     OpenError::NotCompiled {
-        section,
+        section: section.to_string(),
         backend,
         feature,
         compiled: if compiled.is_empty() {
@@ -61,10 +61,12 @@ pub fn check_compiled(devices: &DevicesConfig) -> Result<(), OpenError> {
         FramesBackend::V4l2(_) if !cfg!(feature = "v4l2") => Some(("frames", "v4l2", "v4l2")),
         _ => None,
     };
-    let daq = match devices.daq {
-        DaqBackend::Comedi(_) if !cfg!(feature = "comedi") => Some(("daq", "comedi", "comedi")),
+    let daq = devices.positioners.iter().find_map(|p| match p.daq {
+        DaqBackend::Comedi(_) if !cfg!(feature = "comedi") => {
+            Some((p.section.as_str(), "comedi", "comedi"))
+        }
         _ => None,
-    };
+    });
     let haptic = match devices.haptic {
         HapticBackend::OpenHaptics(_) if !cfg!(feature = "openhaptics") => {
             Some(("haptic", "openhaptics", "openhaptics"))
@@ -95,14 +97,14 @@ pub fn frames(
     }
 }
 
-/// The configured rate output, or None for `"sim"`.
-pub fn daq(backend: &DaqBackend) -> Result<Option<Box<dyn RateOutput>>, OpenError> {
-    match backend {
+/// The configured rate output of a positioner, or None for `"sim"`.
+pub fn daq(positioner: &Positioner) -> Result<Option<Box<dyn RateOutput>>, OpenError> {
+    match &positioner.daq {
         DaqBackend::Sim => Ok(None),
         #[cfg(feature = "comedi")]
         DaqBackend::Comedi(c) => Ok(Some(Box::new(super::daq::comedi::ComediRate::open(c)?))),
         #[cfg(not(feature = "comedi"))]
-        DaqBackend::Comedi(_) => Err(not_compiled("daq", "comedi", "comedi")),
+        DaqBackend::Comedi(_) => Err(not_compiled(&positioner.section, "comedi", "comedi")),
     }
 }
 

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use image::GrayImage;
 
-use super::config::{DaqBackend, DevicesConfig, FramesBackend, HapticBackend};
+use super::config::{DevicesConfig, FramesBackend, HapticBackend, Positioner};
 use super::open::{self, compiled_features};
 use super::Clock;
 
@@ -33,11 +33,24 @@ pub fn configured(devices: &DevicesConfig, clock: Clock) -> Vec<Finding> {
             detail,
         },
     };
-    vec![
-        found("frames", probe_frames(&devices.frames, clock)),
-        found("daq", probe_daq(&devices.daq)),
-        found("haptic", probe_haptic(&devices.haptic, clock)),
-    ]
+    let several = devices.positioners.len() > 1;
+    let positioners = devices.positioners.iter().map(|p| {
+        let result = probe_daq(p);
+        match several {
+            // Each positioner named by its section.
+            true => found(
+                "daq",
+                result
+                    .map(|d| format!("[{}] {d}", p.section))
+                    .map_err(|e| format!("[{}] {e}", p.section)),
+            ),
+            false => found("daq", result),
+        }
+    });
+    std::iter::once(found("frames", probe_frames(&devices.frames, clock)))
+        .chain(positioners)
+        .chain([found("haptic", probe_haptic(&devices.haptic, clock))])
+        .collect()
 }
 
 fn probe_frames(backend: &FramesBackend, clock: Clock) -> Result<String, String> {
@@ -59,8 +72,8 @@ fn probe_frames(backend: &FramesBackend, clock: Clock) -> Result<String, String>
     }
 }
 
-fn probe_daq(backend: &DaqBackend) -> Result<String, String> {
-    match open::daq(backend).map_err(|e| e.to_string())? {
+fn probe_daq(positioner: &Positioner) -> Result<String, String> {
+    match open::daq(positioner).map_err(|e| e.to_string())? {
         None => Ok("sim: the simulated S100".into()),
         Some(daq) => Ok(format!("{}: opened, every output set to zero", daq.name())),
     }

@@ -18,7 +18,7 @@ use image::{GrayImage, Rgb, RgbImage};
 use super::load::{FrameRow, Kind, SessionData};
 use super::{force_unit, plot};
 use crate::session::frames::load_gray;
-use crate::vision::{draw_overlay, EdgeFit, Estimate};
+use crate::vision::{draw_overlays, EdgeFit, Estimate};
 
 /// Width of one thumbnail, pixels.
 pub const THUMB_WIDTH: u32 = 320;
@@ -169,27 +169,33 @@ fn from_recording(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<Str
 
 /// The frame shrunk to [`THUMB_WIDTH`] with the estimate drawn on the small picture.
 pub fn overlay_thumbnail(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
-    overlay_at_width(frame, estimate, THUMB_WIDTH)
+    overlay_at_width(frame, std::slice::from_ref(estimate), THUMB_WIDTH)
 }
 
-/// The frame shrunk to `width` (never enlarged) with the estimate drawn on the small
-/// picture, so the edges stay two pixels wide.
-pub fn overlay_at_width(frame: &GrayImage, estimate: &Estimate, width: u32) -> RgbImage {
+/// The frame shrunk to `width` (never enlarged) with every probe's estimate drawn on
+/// the small picture, so the edges stay two pixels wide.
+pub fn overlay_at_width(frame: &GrayImage, estimates: &[Estimate], width: u32) -> RgbImage {
     if frame.width() <= width || width == 0 {
-        return draw_overlay(frame, estimate);
+        return draw_overlays(frame, estimates);
     }
     let k = f64::from(width) / f64::from(frame.width());
     let h = ((f64::from(frame.height()) * k).round() as u32).max(1);
     let small = imageops::resize(frame, width, h, FilterType::Triangle);
     // Pixel centres: x_small = (x + 0.5) k - 0.5.
     let map = |p: [f64; 2]| p.map(|v| (v + 0.5) * k - 0.5);
-    let mut scaled = *estimate;
-    scaled.apex_px = estimate.apex_px.map(map);
-    for fit in scaled.edges.iter_mut().flatten() {
-        fit.start_px = map(fit.start_px);
-        fit.end_px = map(fit.end_px);
-    }
-    draw_overlay(&small, &scaled)
+    let scaled: Vec<Estimate> = estimates
+        .iter()
+        .map(|estimate| {
+            let mut scaled = *estimate;
+            scaled.apex_px = estimate.apex_px.map(map);
+            for fit in scaled.edges.iter_mut().flatten() {
+                fit.start_px = map(fit.start_px);
+                fit.end_px = map(fit.end_px);
+            }
+            scaled
+        })
+        .collect();
+    draw_overlays(&small, &scaled)
 }
 
 fn shrink(image: &RgbImage) -> RgbImage {

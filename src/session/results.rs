@@ -330,6 +330,30 @@ pub fn parse_results(text: &str) -> Result<Vec<ResultRow>, String> {
     Ok(rows)
 }
 
+/// The results CSV of each probe: `csv` itself for one probe; for several, `csv` with
+/// the probe's name before its extension (`out.csv` -> `out.left.csv`, `estimates.csv`
+/// -> `estimates.left.csv`).
+pub fn per_probe(csv: &Path, names: &[&str]) -> Vec<(String, PathBuf)> {
+    if let [name] = names {
+        return vec![(name.to_string(), csv.to_path_buf())];
+    }
+    let stem = csv
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().to_string());
+    let ext = csv
+        .extension()
+        .map_or_else(|| "csv".to_string(), |e| e.to_string_lossy().to_string());
+    names
+        .iter()
+        .map(|name| {
+            (
+                name.to_string(),
+                csv.with_file_name(format!("{stem}.{name}.{ext}")),
+            )
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

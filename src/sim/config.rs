@@ -7,6 +7,7 @@ use super::contact::SampleParams;
 use super::operator::OperatorParams;
 use super::stage::StageParams;
 use crate::checks::{Checker, ConfigError, List, Range};
+use crate::scene::Entry;
 
 // The accepted ranges, documented with the same words in config/sim.toml: a simulated
 // lab that stays a lab (an S100-like stage, an SEM, a person's hand).
@@ -30,6 +31,11 @@ const SEM_HEIGHT_PX: Range = Range::new(240.0, 2048.0, "px");
 const SEM_MAGNIFICATION: Range = Range::new(500.0, 20_000.0, "");
 /// Magnification step times: within a day.
 const SEM_STEP_S: Range = Range::new(0.0, 86_400.0, "s");
+/// Where an apex may sit at first contact, as a fraction of the view's width or height:
+/// the probe's tip stays inside the frame.
+const APEX_AT: Range = Range::new(0.05, 0.95, "of the view");
+/// A positioner's start along the press direction: within the S100's 12 mm travel.
+const START_UM: Range = Range::new(0.0, 12_000.0, "um");
 /// Stylus travel of a scripted move: a PHANToM's workspace is 70 to 380 mm across.
 const OPERATOR_TRAVEL_MM: Range = Range::new(0.1, 200.0, "mm");
 /// Felt tip forces, as `safety.max_contact_force_nn`.
@@ -91,6 +97,82 @@ struct RawOperator {
     give_up_s: Option<f64>,
     hand_stiffness_n_per_mm: Option<f64>,
     stylus_mass_kg: Option<f64>,
+}
+
+/// `[probe.sim]` as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSimProbe {
+    entry: Option<String>,
+    apex_at: Option<List<f64, 2>>,
+    start_um: Option<f64>,
+}
+
+/// One probe in the simulated lab: where the SEM shows it and where its positioner
+/// starts (`[probe.sim]` of a `[[probe]]` entry; the lone probe of a file takes the
+/// defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimProbe {
+    /// The side its beam enters the view from.
+    pub entry: Entry,
+    /// Where its apex sits at first contact, as fractions of the view's width and height.
+    pub apex_at: [f64; 2],
+    /// Its positioner's start: this far along the press direction, um. First contact is
+    /// at `[sim.sample] contact_at_um`; a start past it holds a steady contact.
+    pub start_um: f64,
+}
+
+/// Where the simulated SEM shows a lone probe, and each of several (two face each
+/// other mid-frame; a third and fourth add a lower row), by default.
+const SINGLE_SLOT: (Entry, [f64; 2]) = (Entry::Left, [0.45, 0.55]);
+const SLOTS: [(Entry, [f64; 2]); 4] = [
+    (Entry::Left, [0.3, 0.45]),
+    (Entry::Right, [0.7, 0.45]),
+    (Entry::Left, [0.3, 0.8]),
+    (Entry::Right, [0.7, 0.8]),
+];
+
+impl SimProbe {
+    /// Probe `k` of `count` with `[probe.sim]`'s keys (spelt with `prefix`) over the
+    /// defaults of its place.
+    pub(crate) fn validate(
+        raw: Option<RawSimProbe>,
+        prefix: &str,
+        k: usize,
+        count: usize,
+        check: &Checker,
+    ) -> Result<SimProbe, ConfigError> {
+        let raw = raw.unwrap_or_default();
+        let key = |name: &str| format!("{prefix}sim.{name}");
+        let (entry, apex_at) = match count {
+            1 => SINGLE_SLOT,
+            _ => SLOTS[k.min(SLOTS.len() - 1)],
+        };
+        let entry = match raw.entry.as_deref() {
+            None => entry,
+            Some("left") => Entry::Left,
+            Some("right") => Entry::Right,
+            Some(other) => {
+                return Err(check.invalid(
+                    &key("entry"),
+                    format_args!("{other:?}"),
+                    "must be \"left\" or \"right\"",
+                ))
+            }
+        };
+        let apex_at = match raw.apex_at {
+            None => apex_at,
+            Some(List([x, y])) => [
+                check.number(&format!("{}[0]", key("apex_at")), x, APEX_AT)?,
+                check.number(&format!("{}[1]", key("apex_at")), y, APEX_AT)?,
+            ],
+        };
+        Ok(SimProbe {
+            entry,
+            apex_at,
+            start_um: check.number_or(&key("start_um"), raw.start_um, 0.0, START_UM)?,
+        })
+    }
 }
 
 /// The simulated SEM.

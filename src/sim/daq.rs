@@ -27,12 +27,18 @@ pub struct SimStage {
 }
 
 impl SimStage {
-    /// The stage and the reading end of its state for the SEM.
-    pub fn new(params: StageParams) -> (SimStage, triple_buffer::Output<StageSnapshot>) {
-        let (snapshots, output) = triple_buffer::triple_buffer(&StageSnapshot::default());
+    /// The stage, at rest at `start_um`, and the reading end of its state for the SEM.
+    pub fn new(
+        params: StageParams,
+        start_um: Vector3<f64>,
+    ) -> (SimStage, triple_buffer::Output<StageSnapshot>) {
+        let (snapshots, output) = triple_buffer::triple_buffer(&StageSnapshot {
+            position_um: start_um,
+            ..StageSnapshot::default()
+        });
         (
             SimStage {
-                stage: Stage::new(params),
+                stage: Stage::starting_at(params, start_um),
                 snapshots,
             },
             output,

@@ -5,16 +5,20 @@ use image::GrayImage;
 use super::daq::StageSnapshot;
 use super::sem::SemScene;
 use crate::hw::clock::sleep_until;
+use crate::hw::frames::MAX_TRUTHS;
 use crate::hw::frames::{FrameError, FrameMeta, FrameSource};
 use crate::hw::Clock;
 use crate::scene::Renderer;
+use nalgebra::Vector3;
 
 /// Slack between the end of a render and its frame's delivery, seconds.
 const RENDER_MARGIN_S: f64 = 0.001;
 
 pub struct SimSem {
     scene: SemScene,
-    stage: Option<triple_buffer::Output<StageSnapshot>>,
+    /// Each probe's simulated positioner, in the probes' order (None: a real one).
+    stages: Vec<Option<triple_buffer::Output<StageSnapshot>>>,
+    positions_um: [Vector3<f64>; MAX_TRUTHS],
     renderer: Renderer,
     clock: Clock,
     period_s: f64,
@@ -25,16 +29,18 @@ pub struct SimSem {
 }
 
 impl SimSem {
-    /// `stage`: the simulated S100's state; without it the probe hangs free.
+    /// `stages`: each probe's simulated positioner, in the probes' order; a probe
+    /// without one (None, or past the end) hangs free.
     pub fn new(
         scene: SemScene,
-        stage: Option<triple_buffer::Output<StageSnapshot>>,
+        stages: Vec<Option<triple_buffer::Output<StageSnapshot>>>,
         clock: Clock,
     ) -> Self {
         let period_s = 1.0 / scene.params.rate_hz;
         SimSem {
             scene,
-            stage,
+            stages,
+            positions_um: [Vector3::zeros(); MAX_TRUTHS],
             renderer: Renderer::new(),
             clock,
             period_s,
@@ -69,12 +75,13 @@ impl FrameSource for SimSem {
         let start_s = deliver_s - (2.0 * self.render_s + RENDER_MARGIN_S);
         sleep_until(self.clock.monotonic_ns_at(start_s), 0);
         let render_started_s = self.clock.now_s();
-        let stage_um = self
-            .stage
-            .as_mut()
-            .map(|s| s.read().position_at(capture_s))
-            .unwrap_or_default();
-        let (spec, truth) = self.scene.frame(capture_s, self.sequence, stage_um);
+        for (position, stage) in self.positions_um.iter_mut().zip(&mut self.stages) {
+            *position = stage
+                .as_mut()
+                .map_or_else(Vector3::zeros, |s| s.read().position_at(capture_s));
+        }
+        let stages = &self.positions_um[..self.stages.len().min(MAX_TRUTHS)];
+        let (spec, truth) = self.scene.view(capture_s, self.sequence, stages);
         self.renderer.render_into(&spec, frame);
         let took_s = self.clock.now_s() - render_started_s;
         self.render_s = took_s.max(self.render_s * 0.99);
@@ -84,7 +91,7 @@ impl FrameSource for SimSem {
         Ok(FrameMeta {
             sequence: self.sequence,
             captured_s: capture_s,
-            truth: Some(truth),
+            truth,
         })
     }
 }

@@ -6,11 +6,14 @@
 use image::GrayImage;
 use nalgebra::Vector3;
 
-use super::config::SemParams;
+use super::config::{SemParams, SimProbe};
 use super::contact::{Bending, Contact};
-use crate::hw::frames::FrameTruth;
+use crate::hw::frames::{FrameTruth, MAX_TRUTHS, NO_TRUTH};
 use crate::model::Cantilever;
-use crate::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
+use crate::scene::{
+    self, Entry, FrameSpec, Others, Placement, ProbeGeometry, Session, Setup, Style,
+    MAX_OTHER_PROBES,
+};
 use crate::vision::{CalibrationConfig, Threshold};
 
 /// The probe as the simulated SEM draws it: the typical pyramid on the configured beam.
@@ -24,59 +27,55 @@ pub fn probe_for(cantilever: &Cantilever) -> ProbeGeometry {
     }
 }
 
-/// Where the apex sits in the frame at contact, as fractions of width and height.
+/// Where a lone probe's apex sits in the frame at contact, as fractions of width and
+/// height.
 const APEX_AT_CONTACT: [f64; 2] = [0.45, 0.55];
 
 #[derive(Debug, Clone)]
 pub struct SemScene {
     pub params: SemParams,
-    pub setup: Setup,
     pub style: Style,
+    /// The probes in view, in the probes' order (at least one).
+    pub probes: Vec<ProbeView>,
+}
+
+/// One probe as the simulated SEM shows it.
+#[derive(Debug, Clone)]
+pub struct ProbeView {
+    pub setup: Setup,
     pub contact: Contact,
     /// +1 or -1: the sign of the tip angle on screen while pressing.
     pub pressing_sign: f64,
+    /// Where it is in view.
+    pub place: SimProbe,
 }
 
-impl SemScene {
-    pub fn new(params: SemParams, contact: Contact, pressing_sign: f64) -> Self {
-        let style = match params.style.as_str() {
-            "clean" => Style::Clean,
-            "clutter" => Style::Clutter,
-            "harsh" => Style::Harsh,
-            _ => Style::Noisy,
-        };
-        let setup = Setup {
-            probe: probe_for(&contact.cantilever),
-            width: params.width,
-            height: params.height,
-            entry: Entry::Left,
-            base_deg: -18.0,
-        };
-        SemScene {
-            params,
-            setup,
-            style,
+impl ProbeView {
+    /// `contact`'s cantilever, pressing with tip angles of `pressing_sign`, placed at
+    /// `place` in a view of `params`.
+    pub fn new(params: &SemParams, contact: Contact, pressing_sign: f64, place: SimProbe) -> Self {
+        ProbeView {
+            setup: Setup {
+                probe: probe_for(&contact.cantilever),
+                width: params.width,
+                height: params.height,
+                entry: place.entry,
+                base_deg: match place.entry {
+                    Entry::Left => BASE_DEG,
+                    Entry::Right => -BASE_DEG,
+                },
+            },
             contact,
             pressing_sign,
+            place,
         }
     }
 
-    /// The frame captured at `t_s` with the stage at `stage_um`, and its truth.
-    pub fn frame(
-        &self,
-        t_s: f64,
-        sequence: u64,
-        stage_um: Vector3<f64>,
-    ) -> (FrameSpec, FrameTruth) {
+    /// Its pose and truth with its positioner at `stage_um`, in a view of `spec`'s size
+    /// and magnification.
+    fn placed(&self, spec: &FrameSpec, stage_um: Vector3<f64>) -> (Placement, FrameTruth, f64) {
         let bending: Bending = self.contact.bending(stage_um);
         let angle_deg = self.pressing_sign * bending.phi0_rad.to_degrees();
-        let magnification = self.params.magnification_at(t_s);
-        let seed = self
-            .params
-            .seed
-            .wrapping_mul(1_000_003)
-            .wrapping_add(sequence);
-        let mut spec = self.setup.frame(self.style, angle_deg, magnification, seed);
         // Before contact the probe descends toward its contact point; then the apex stays
         // on the sample and the beam bends.
         let travel_um = stage_um.dot(&self.contact.press_direction);
@@ -84,17 +83,122 @@ impl SemScene {
         let ppu = spec.px_per_um();
         let (w, h) = (f64::from(spec.width), f64::from(spec.height));
         let lateral = stage_um - self.contact.press_direction * travel_um;
-        spec.apex_px = [
-            (APEX_AT_CONTACT[0] * w + lateral.x * ppu).clamp(0.25 * w, 0.75 * w),
-            (APEX_AT_CONTACT[1] * h - gap_um * ppu).clamp(0.3 * h, 0.75 * h),
-        ];
-        spec.substrate_gap_um = gap_um;
+        let [ax, ay] = self.place.apex_at;
+        // The apex may wander further toward the beam's far end than back over it.
+        let (left, right) = match self.place.entry {
+            Entry::Left => (0.2, 0.3),
+            Entry::Right => (0.3, 0.2),
+        };
+        let place = Placement {
+            probe: self.setup.probe,
+            entry: self.setup.entry,
+            base_deg: self.setup.base_deg,
+            angle_deg,
+            apex_px: [
+                (ax * w + lateral.x * ppu).clamp((ax - left) * w, (ax + right) * w),
+                (ay * h - gap_um * ppu).clamp((ay - 0.25) * h, (ay + 0.2) * h),
+            ],
+            blank: false,
+        };
         let truth = FrameTruth {
             probe_in_view: true,
             angle_deg,
             force_nn: self.pressing_sign * bending.force_nn,
         };
+        (place, truth, gap_um)
+    }
+}
+
+/// The beam's tilt on screen, degrees (mirrored for a probe entering from the right).
+const BASE_DEG: f64 = -18.0;
+
+impl SemScene {
+    /// One probe in view, where a lone probe sits.
+    pub fn new(params: SemParams, contact: Contact, pressing_sign: f64) -> Self {
+        let place = SimProbe {
+            entry: Entry::Left,
+            apex_at: APEX_AT_CONTACT,
+            start_um: 0.0,
+        };
+        let probe = ProbeView::new(&params, contact, pressing_sign, place);
+        SemScene::several(params, vec![probe])
+    }
+
+    /// `probes` in one view (at least one; the first is the frame's own probe).
+    pub fn several(params: SemParams, probes: Vec<ProbeView>) -> Self {
+        assert!(
+            (1..=MAX_TRUTHS).contains(&probes.len()),
+            "a view of 1 to {MAX_TRUTHS} probes"
+        );
+        let style = match params.style.as_str() {
+            "clean" => Style::Clean,
+            "clutter" => Style::Clutter,
+            "harsh" => Style::Harsh,
+            _ => Style::Noisy,
+        };
+        SemScene {
+            params,
+            style,
+            probes,
+        }
+    }
+
+    /// The frame captured at `t_s` with the first probe's positioner at `stage_um` (the
+    /// others at rest), and that probe's truth.
+    pub fn frame(
+        &self,
+        t_s: f64,
+        sequence: u64,
+        stage_um: Vector3<f64>,
+    ) -> (FrameSpec, FrameTruth) {
+        let (spec, truths) = self.view(t_s, sequence, &[stage_um]);
+        let truth = truths[0].unwrap_or(FrameTruth {
+            probe_in_view: false,
+            angle_deg: 0.0,
+            force_nn: 0.0,
+        });
         (spec, truth)
+    }
+
+    /// The frame captured at `t_s` with each probe's positioner at `stages_um` (in the
+    /// probes' order; a probe without one is at rest), and each probe's truth.
+    pub fn view(
+        &self,
+        t_s: f64,
+        sequence: u64,
+        stages_um: &[Vector3<f64>],
+    ) -> (FrameSpec, [Option<FrameTruth>; MAX_TRUTHS]) {
+        let magnification = self.params.magnification_at(t_s);
+        let seed = self
+            .params
+            .seed
+            .wrapping_mul(1_000_003)
+            .wrapping_add(sequence);
+        let first = &self.probes[0];
+        let mut spec = first.setup.frame(self.style, 0.0, magnification, seed);
+        let mut truths = NO_TRUTH;
+        let (own, _, _) = first.placed(&spec, Vector3::zeros());
+        let mut others = [own; MAX_OTHER_PROBES];
+        for (k, probe) in self.probes.iter().enumerate().take(MAX_TRUTHS) {
+            let stage_um = stages_um.get(k).copied().unwrap_or_default();
+            let (place, truth, gap_um) = probe.placed(&spec, stage_um);
+            truths[k] = Some(truth);
+            match k {
+                0 => {
+                    spec = FrameSpec {
+                        substrate_gap_um: gap_um,
+                        ..spec.placing(place)
+                    }
+                }
+                k => others[k - 1] = place,
+            }
+        }
+        if self.probes.len() > 1 {
+            // The sample's edge would run under the first probe only.
+            spec.look.substrate = None;
+            spec.others = Others::of(&others[..self.probes.len() - 1]);
+        }
+        (spec, truths)
     }
 
     /// The calibration frame (undeformed probe) and the clicks a person would make on it.
@@ -103,7 +207,37 @@ impl SemScene {
         threshold: Threshold,
         window_deg: f64,
     ) -> (GrayImage, CalibrationConfig) {
-        let reference = self.setup.reference(self.params.seed);
+        let (image, mut clicks) = self.references(threshold, window_deg);
+        (image, clicks.swap_remove(0))
+    }
+
+    /// The calibration frame (every probe undeformed) and the clicks a person would make
+    /// on each probe, in the probes' order.
+    pub fn references(
+        &self,
+        threshold: Threshold,
+        window_deg: f64,
+    ) -> (GrayImage, Vec<CalibrationConfig>) {
+        let mut reference = self.probes[0].setup.reference(self.params.seed);
+        if self.probes.len() > 1 {
+            // Every probe at rest where it stands in the run's first frames.
+            let (w, h) = (f64::from(reference.width), f64::from(reference.height));
+            reference.magnification = self.params.magnification_at(0.0);
+            let place = |p: &ProbeView| Placement {
+                probe: p.setup.probe,
+                entry: p.setup.entry,
+                base_deg: p.setup.base_deg,
+                angle_deg: 0.0,
+                apex_px: [p.place.apex_at[0] * w, p.place.apex_at[1] * h],
+                blank: false,
+            };
+            let others: Vec<Placement> = self.probes[1..].iter().map(place).collect();
+            reference = FrameSpec {
+                others: Others::of(&others),
+                ..reference.placing(place(&self.probes[0]))
+            };
+            reference.look.particles = 0;
+        }
         let session = Session {
             reference,
             frames: Vec::new(),
@@ -112,14 +246,18 @@ impl SemScene {
             window_deg,
             click_seed: self.params.seed ^ 0x5EED,
         };
-        let clicks = session.clicks();
         let (image, _) = scene::render(&reference);
-        let calibration = CalibrationConfig {
-            reference_image: "<simulated SEM reference frame>".into(),
-            red: clicks.red,
-            blue: clicks.blue,
-            green: clicks.green,
-        };
-        (image, calibration)
+        let clicks = (0..self.probes.len())
+            .map(|k| {
+                let clicks = session.clicks_of(k);
+                CalibrationConfig {
+                    reference_image: "<simulated SEM reference frame>".into(),
+                    red: clicks.red,
+                    blue: clicks.blue,
+                    green: clicks.green,
+                }
+            })
+            .collect();
+        (image, clicks)
     }
 }

@@ -37,9 +37,14 @@ pub struct Stage {
 
 impl Stage {
     pub fn new(params: StageParams) -> Self {
+        Stage::starting_at(params, Vector3::zeros())
+    }
+
+    /// A stage at rest at `position_um`.
+    pub fn starting_at(params: StageParams, position_um: Vector3<f64>) -> Self {
         Stage {
             params,
-            position_um: Vector3::zeros(),
+            position_um,
             velocity_um_s: Vector3::zeros(),
             command_um_s: Vector3::zeros(),
             last_s: None,

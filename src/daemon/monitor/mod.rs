@@ -47,6 +47,8 @@ pub struct DaemonView {
     pub stream: Option<Arc<StreamShared>>,
     /// A panic to inject into the monitor thread (tests only).
     pub inject: Option<PanicInjection>,
+    /// The probes' names, in order (the frame panel names each).
+    pub probe_names: Vec<String>,
 }
 
 /// A running monitor thread.

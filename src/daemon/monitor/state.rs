@@ -77,9 +77,13 @@ impl Producer {
     pub fn step(&mut self) {
         PanicInjection::check(self.view.inject.as_ref(), "monitor");
         self.steps += 1;
+        // The force history is the felt probe's.
+        let active = self.view.loop_shared.active_probe();
         while let Ok(e) = self.reader.estimates.pop() {
-            let force = e.estimate.felt_force_nn().unwrap_or(f64::NAN);
-            self.fresh.push([e.frame_time_s, force]);
+            if e.probe == active {
+                let force = e.estimate.felt_force_nn().unwrap_or(f64::NAN);
+                self.fresh.push([e.frame_time_s, force]);
+            }
         }
         if self.reader.frames.update() && self.reader.frames.output_buffer_mut().image.width() > 0 {
             self.take_frame();
@@ -97,29 +101,50 @@ impl Producer {
         }
     }
 
+    /// The newest frame: the first probe's numbers at the top level, and every probe's
+    /// (named, the felt one marked) under `probes`.
     fn take_frame(&mut self) {
         let snapshot = self.reader.frames.output_buffer_mut();
-        let p = &snapshot.estimate;
-        let estimate = &p.estimate;
-        self.frame = Some(json!({
-            "seq": p.frame_sequence,
-            "t": p.frame_time_s,
-            "detected": estimate.detected,
-            "felt": estimate.felt_force_nn().is_some(),
-            "angle_deg": estimate.shown(estimate.angle_deg),
-            "force_nn": estimate.shown(estimate.force_nn),
-            "confidence": estimate.confidence,
-            "width": snapshot.image.width(),
-            "height": snapshot.image.height(),
-        }));
+        let Some(p) = snapshot.estimates().first() else {
+            return;
+        };
+        let active = self.view.loop_shared.active_probe();
+        let numbers = |estimate: &Estimate| {
+            json!({
+                "detected": estimate.detected,
+                "felt": estimate.felt_force_nn().is_some(),
+                "angle_deg": estimate.shown(estimate.angle_deg),
+                "force_nn": estimate.shown(estimate.force_nn),
+                "confidence": estimate.confidence,
+            })
+        };
+        let probes: Vec<serde_json::Value> = snapshot
+            .estimates()
+            .iter()
+            .map(|q| {
+                let mut entry = numbers(&q.estimate);
+                entry["name"] = json!(self.view.probe_names.get(q.probe));
+                entry["active"] = json!(q.probe == active);
+                entry
+            })
+            .collect();
+        let mut frame = numbers(&p.estimate);
+        frame["seq"] = json!(p.frame_sequence);
+        frame["t"] = json!(p.frame_time_s);
+        frame["width"] = json!(snapshot.image.width());
+        frame["height"] = json!(snapshot.image.height());
+        frame["probes"] = json!(probes);
+        let sequence = p.frame_sequence;
+        self.frame = Some(frame);
+        let estimates: Vec<Estimate> = snapshot.tracked().collect();
         if self.serve {
             let width = snapshot.image.width().min(PAGE_FRAME_WIDTH);
-            if let Some(png) = png(&overlay_at_width(&snapshot.image, estimate, width)) {
+            if let Some(png) = png(&overlay_at_width(&snapshot.image, &estimates, width)) {
                 self.hub.set_frame(png);
             }
         }
         if let Some(thumbnails) = &mut self.thumbnails {
-            thumbnails.offer(&snapshot.image, estimate, p.frame_sequence);
+            thumbnails.offer(&snapshot.image, &estimates, sequence);
         }
     }
 
@@ -221,7 +246,7 @@ impl Thumbnails {
         }
     }
 
-    fn offer(&mut self, frame: &GrayImage, estimate: &Estimate, sequence: u64) {
+    fn offer(&mut self, frame: &GrayImage, estimates: &[Estimate], sequence: u64) {
         let now = Instant::now();
         if self.failed || now < self.next {
             return;
@@ -231,7 +256,7 @@ impl Thumbnails {
         let written = std::fs::create_dir_all(&self.dir)
             .map_err(|e| e.to_string())
             .and_then(|()| {
-                overlay_at_width(frame, estimate, THUMB_WIDTH)
+                overlay_at_width(frame, estimates, THUMB_WIDTH)
                     .save(&path)
                     .map_err(|e| e.to_string())
             });

@@ -49,6 +49,8 @@ fn known(v: f64) -> Option<f64> {
 #[derive(Serialize)]
 struct EstimateDatagram {
     kind: &'static str,
+    /// The probe's place among the configured probes (0: the first, or the lone one).
+    probe: usize,
     seq: u64,
     frame_seq: u64,
     utc: Utc,
@@ -101,6 +103,7 @@ impl Format {
         let unix_s = self.anchor.unix_ns(p.frame_time_s) as f64 * 1e-9;
         let datagram = EstimateDatagram {
             kind: "estimate",
+            probe: p.probe,
             seq: p.seq,
             frame_seq: p.frame_sequence,
             utc: Utc(unix_s),
@@ -188,6 +191,7 @@ mod tests {
         };
         let mut out = Vec::new();
         let e = Published {
+            probe: 0,
             seq: 7,
             frame_sequence: 9,
             frame_time_s: 70.25,

@@ -35,14 +35,14 @@ pub enum DaqBackend {
 /// `[daq]` as written: `backend` selects the keys that exist.
 #[derive(Debug, Deserialize)]
 #[serde(tag = "backend", rename_all = "lowercase")]
-pub(crate) enum RawDaq {
+enum RawDaq {
     Sim(NoKeys),
     Comedi(RawComedi),
 }
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct RawComedi {
+struct RawComedi {
     device: Option<String>,
     /// Each axis's table, read as a [`RawAxis`] in [`RawComedi::validate`] so that
     /// errors name the axis.
@@ -137,23 +137,31 @@ pub struct StepDirAxis {
     pub invert_direction: bool,
 }
 
-impl RawDaq {
-    pub(crate) fn validate(self, check: &Checker) -> Result<DaqBackend, ConfigError> {
-        match self {
+impl DaqBackend {
+    /// Reads and validates a DAQ section as written: `section` names it in messages
+    /// (`daq` for the lab's one positioner, `probe[1].daq` for an entry's).
+    pub(crate) fn validate(
+        check: &Checker,
+        section: &str,
+        table: toml::Table,
+    ) -> Result<DaqBackend, ConfigError> {
+        match tagged(check, section, "backend", Some("sim"), table)? {
             RawDaq::Sim(NoKeys {}) => Ok(DaqBackend::Sim),
-            RawDaq::Comedi(raw) => raw.validate(check).map(|c| DaqBackend::Comedi(Box::new(c))),
+            RawDaq::Comedi(raw) => raw
+                .validate(check, section)
+                .map(|c| DaqBackend::Comedi(Box::new(c))),
         }
     }
 }
 
 impl RawComedi {
-    fn validate(self, check: &Checker) -> Result<ComediConfig, ConfigError> {
+    fn validate(self, check: &Checker, section: &str) -> Result<ComediConfig, ConfigError> {
         let device = PathBuf::from(self.device.unwrap_or_else(|| "/dev/comedi0".into()));
         let axes = [("x", self.x), ("y", self.y), ("z", self.z)];
         let mut out = [AxisOutput::None, AxisOutput::None, AxisOutput::None];
         let mut axis_devices = [device.clone(), device.clone(), device.clone()];
         for ((slot, board), (name, table)) in out.iter_mut().zip(&mut axis_devices).zip(axes) {
-            let key = format!("daq.{name}");
+            let key = format!("{section}.{name}");
             let table = required(check, &format!("[{key}]"), "comedi", table)?;
             let raw: RawAxis = tagged(check, &key, "output", None, table)?;
             if let Some(d) = raw.device() {
@@ -169,7 +177,7 @@ impl RawComedi {
             *slot = raw.validate(check, &key)?;
         }
         if out.iter().all(|a| *a == AxisOutput::None) {
-            return Err(check.inconsistent("daq: every axis has output = \"none\"".into()));
+            return Err(check.inconsistent(format!("{section}: every axis has output = \"none\"")));
         }
         Ok(ComediConfig {
             device,
@@ -266,7 +274,7 @@ mod tests {
     #[test]
     fn both_output_styles() {
         let cfg = parse(&format!("[daq]\nbackend = \"comedi\"\n{AXES}")).unwrap();
-        let DaqBackend::Comedi(c) = cfg.devices.daq else {
+        let DaqBackend::Comedi(c) = &cfg.devices.positioners[0].daq else {
             panic!("not comedi")
         };
         assert_eq!(c.device, PathBuf::from("/dev/comedi0"));
@@ -290,11 +298,11 @@ mod tests {
         assert_eq!(c.axis_devices[1], PathBuf::from("/dev/comedi0"));
         let second = AXES.replace("[daq.y]\n", "[daq.y]\ndevice = \"/dev/comedi1\"\n");
         let cfg = parse(&format!("[daq]\nbackend = \"comedi\"\n{second}")).unwrap();
-        let DaqBackend::Comedi(c) = cfg.devices.daq else {
+        let DaqBackend::Comedi(c) = &cfg.devices.positioners[0].daq else {
             panic!("not comedi")
         };
         assert_eq!(
-            c.axis_devices.map(|d| d.display().to_string()),
+            c.axis_devices.clone().map(|d| d.display().to_string()),
             ["/dev/comedi0", "/dev/comedi1", "/dev/comedi0"]
         );
     }

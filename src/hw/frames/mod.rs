@@ -12,9 +12,16 @@ pub struct FrameMeta {
     pub sequence: u64,
     /// Capture time on the daemon's clock, seconds.
     pub captured_s: f64,
-    /// Ground truth, only from a simulated SEM.
-    pub truth: Option<FrameTruth>,
+    /// Ground truth, only from a simulated SEM: one per probe in view, in order.
+    pub truth: [Option<FrameTruth>; MAX_TRUTHS],
 }
+
+/// Probes a frame carries truth for: an S100 carries up to four positioners, and the
+/// tracker follows as many probes in one view (`vision::MAX_PROBES`).
+pub const MAX_TRUTHS: usize = 4;
+
+/// A frame without ground truth (from real hardware).
+pub const NO_TRUTH: [Option<FrameTruth>; MAX_TRUTHS] = [None; MAX_TRUTHS];
 
 /// What a simulated SEM knows about the frame it rendered.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -31,7 +31,7 @@ use std::time::Instant;
 use image::GrayImage;
 
 use super::config::{PipeConfig, PipeFormat, PipePath};
-use super::{FrameError, FrameMeta, FrameSource};
+use super::{FrameError, FrameMeta, FrameSource, NO_TRUTH};
 use crate::hw::Clock;
 
 pub const MAGIC: [u8; 4] = *b"NFRM";
@@ -268,7 +268,7 @@ impl FrameSource for PipeSource {
         Ok(FrameMeta {
             sequence,
             captured_s,
-            truth: None,
+            truth: NO_TRUTH,
         })
     }
 }

@@ -11,7 +11,7 @@ use image::GrayImage;
 use super::config::{PixelFormat, V4l2Config};
 use super::convert::{self, SequenceCounter};
 use super::v4l2_sys::{self as sys, Buffer, Device, Mapping};
-use super::{FrameError, FrameMeta, FrameSource};
+use super::{FrameError, FrameMeta, FrameSource, NO_TRUTH};
 use crate::hw::Clock;
 
 /// An open, streaming device.
@@ -294,7 +294,7 @@ impl FrameSource for V4l2Source {
             return Ok(FrameMeta {
                 sequence,
                 captured_s,
-                truth: None,
+                truth: NO_TRUTH,
             });
         }
     }
