@@ -1,9 +1,9 @@
 /* A stand-in for OpenHaptics' libHD.so, loaded by nanoforce's openhaptics backend in
  * place of the real one (haptic.library = its path). Like the real scheduler it runs
  * the scheduled callbacks on its own thread every millisecond. The test drives it
- * through the fake_hd_* functions: the stylus position and velocity, errors to raise
- * in the next frame, a pause of the servo thread; and reads back what the device was
- * told (force, force output, scheduler and device state). */
+ * through the fake_hd_* functions: the stylus position, velocity and buttons, errors
+ * to raise in the next frame, a pause of the servo thread; and reads back what the
+ * device was told (force, force output, scheduler and device state). */
 #include <pthread.h>
 #include <string.h>
 #include <time.h>
@@ -12,6 +12,7 @@ typedef unsigned int HHD;
 typedef struct { unsigned int errorCode; int internalErrorCode; HHD hHD; } HDErrorInfo;
 typedef unsigned int (*HDSchedulerCallback)(void *);
 
+#define HD_CURRENT_BUTTONS 0x2000
 #define HD_CURRENT_POSITION 0x2050
 #define HD_CURRENT_VELOCITY 0x2051
 #define HD_CURRENT_FORCE 0x2700
@@ -24,6 +25,7 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_t servo;
 static int running, paused, initialized, force_output, in_frame;
 static double position[3], velocity[3], force[3];
+static int buttons;
 static long frames;
 static HDErrorInfo errors[16];
 static int n_errors;
@@ -80,6 +82,11 @@ void hdGetDoublev(unsigned p, double *v) {
     if (p == HD_CURRENT_POSITION) memcpy(v, position, sizeof position);
     if (p == HD_CURRENT_VELOCITY) memcpy(v, velocity, sizeof velocity);
     if (p == HD_CURRENT_FORCE) memcpy(v, force, sizeof force);
+    pthread_mutex_unlock(&lock);
+}
+void hdGetIntegerv(unsigned p, int *v) {
+    pthread_mutex_lock(&lock);
+    if (p == HD_CURRENT_BUTTONS) *v = buttons;
     pthread_mutex_unlock(&lock);
 }
 void hdSetDoublev(unsigned p, const double *v) {
@@ -144,6 +151,7 @@ void hdStopScheduler(void) {
 void fake_hd_set_stylus(const double p[3], const double v[3]) {
     pthread_mutex_lock(&lock); memcpy(position, p, sizeof position); memcpy(velocity, v, sizeof velocity); pthread_mutex_unlock(&lock);
 }
+void fake_hd_set_buttons(int b) { pthread_mutex_lock(&lock); buttons = b; pthread_mutex_unlock(&lock); }
 void fake_hd_raise(unsigned code, int internal) {
     pthread_mutex_lock(&lock); pending = (HDErrorInfo){code, internal, 0}; pthread_mutex_unlock(&lock);
 }

@@ -1,13 +1,13 @@
 //! The openhaptics backend against a fake libHD.so with its own 1 kHz servo thread:
-//! init by name, samples in, forces out only while enabled and healthy, HD errors
-//! mapped to the daemon's errors, a stalled servo loop reported as lost, and a clean
-//! shutdown. One test: the fake's state is per process.
+//! init by name, samples and buttons in, forces out only while enabled and healthy, HD
+//! errors mapped to the daemon's errors, a stalled servo loop reported as lost, and a
+//! clean shutdown. One test: the fake's state is per process.
 use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
 use nanoforce::hw::haptic::config::OpenHapticsConfig;
 use nanoforce::hw::haptic::openhaptics::OpenHaptics;
-use nanoforce::hw::haptic::{HapticDevice, HapticError};
+use nanoforce::hw::haptic::{HapticDevice, HapticError, SWITCH_BUTTON};
 
 use super::support::build;
 
@@ -24,6 +24,11 @@ impl Fake {
         let f: unsafe extern "C" fn(*const f64, *const f64) = self.call("fake_hd_set_stylus");
         // SAFETY: two arrays of three doubles.
         unsafe { f(p.as_ptr(), v.as_ptr()) }
+    }
+    fn set_buttons(&self, buttons: i32) {
+        let f: unsafe extern "C" fn(i32) = self.call("fake_hd_set_buttons");
+        // SAFETY: plain value.
+        unsafe { f(buttons) }
     }
     fn raise(&self, code: u32) {
         let f: unsafe extern "C" fn(u32, i32) = self.call("fake_hd_raise");
@@ -128,6 +133,18 @@ fn phantom_through_a_fake_libhd() {
     });
     let s = dev.read(now(Instant::now())).unwrap();
     assert_eq!(s.velocity_mm_s, Vector3::new(10.0, 0.0, -4.0));
+    assert_eq!(s.buttons, 0, "no button held");
+
+    // Both PHANToM buttons, as HD_CURRENT_BUTTONS gives them: the same bits.
+    let mut buttons = || dev.read(now(Instant::now())).unwrap().buttons;
+    fake.set_buttons(0b11);
+    eventually("both buttons", || buttons() == 0b11);
+    fake.set_buttons(0b01);
+    eventually("the front button", || buttons() == 0b01);
+    fake.set_buttons(0b10);
+    eventually("the switch button", || buttons() == SWITCH_BUTTON);
+    fake.set_buttons(0);
+    eventually("released", || buttons() == 0);
 
     // Forces: nothing rendered while disabled; the newest force once enabled.
     dev.write_force(Vector3::new(0.5, -1.0, 2.0)).unwrap();

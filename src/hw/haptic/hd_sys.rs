@@ -33,6 +33,11 @@ pub const HD_COMM_ERROR: c_uint = 0x0302;
 pub const HD_COMM_CONFIG_ERROR: c_uint = 0x0303;
 pub const HD_TIMER_ERROR: c_uint = 0x0304;
 
+/// The buttons held down (`HDint`), one bit each: `HD_DEVICE_BUTTON_1` (the front
+/// button) is bit 0, `HD_DEVICE_BUTTON_2` bit 1.
+pub const HD_CURRENT_BUTTONS: c_uint = 0x2000;
+pub const HD_DEVICE_BUTTON_1: c_int = 1 << 0;
+pub const HD_DEVICE_BUTTON_2: c_int = 1 << 1;
 pub const HD_CURRENT_POSITION: c_uint = 0x2050;
 pub const HD_CURRENT_VELOCITY: c_uint = 0x2051;
 pub const HD_CURRENT_FORCE: c_uint = 0x2700;
@@ -91,6 +96,7 @@ pub struct Api {
     pub begin_frame: unsafe extern "C" fn(Hhd),
     pub end_frame: unsafe extern "C" fn(Hhd),
     pub get_doublev: unsafe extern "C" fn(c_uint, *mut f64),
+    pub get_integerv: unsafe extern "C" fn(c_uint, *mut c_int),
     pub set_doublev: unsafe extern "C" fn(c_uint, *const f64),
     pub enable: unsafe extern "C" fn(c_uint),
     pub disable: unsafe extern "C" fn(c_uint),
@@ -135,6 +141,7 @@ impl Api {
             begin_frame: sym!("hdBeginFrame"),
             end_frame: sym!("hdEndFrame"),
             get_doublev: sym!("hdGetDoublev"),
+            get_integerv: sym!("hdGetIntegerv"),
             set_doublev: sym!("hdSetDoublev"),
             enable: sym!("hdEnable"),
             disable: sym!("hdDisable"),

@@ -2,16 +2,16 @@
 //!
 //! OpenHaptics runs its own 1 kHz servo thread (the HD scheduler); the daemon's haptic
 //! loop runs on another. They meet without blocking either: the servo callback writes
-//! each sample (position, velocity) into a triple buffer and takes the newest force
-//! from another; the forces-on request, the servo tick counter and the last HD error
-//! are atomics. Neither side ever waits for the other.
+//! each sample (position, velocity, buttons) into a triple buffer and takes the newest
+//! force from another; the forces-on request, the servo tick counter and the last HD
+//! error are atomics. Neither side ever waits for the other.
 //!
 //! Safety: forces are off until the daemon enables them, and the callback switches them
 //! off itself on any HD error (the daemon must enable them again after the fault).
 //! [`HapticDevice::read`] reports that error (comm/device errors as
 //! [`HapticError::Lost`], max force/velocity and warm motors as [`HapticError::Device`])
 //! and a servo loop that stops ticking as lost, so the daemon's safety rules apply.
-use std::ffi::{c_uint, c_void, CString};
+use std::ffi::{c_int, c_uint, c_void, CString};
 use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -20,12 +20,18 @@ use nalgebra::Vector3;
 
 use super::config::OpenHapticsConfig;
 use super::hd_sys::{self as hd, Api, Fault, Hhd};
-use super::{HapticDevice, HapticError, HapticSample};
+use super::{HapticDevice, HapticError, HapticSample, SWITCH_BUTTON};
+
+// HD's button masks are the bits of `HapticSample::buttons`: they pass through as read.
+const _: () =
+    assert!(hd::HD_DEVICE_BUTTON_1 == 1 && hd::HD_DEVICE_BUTTON_2 as u32 == SWITCH_BUTTON);
 
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Sample {
     position_mm: [f64; 3],
     velocity_mm_s: [f64; 3],
+    /// `HD_CURRENT_BUTTONS` as read in the frame.
+    buttons: u32,
 }
 
 /// What both threads see.
@@ -61,13 +67,16 @@ impl Servo {
     fn tick(&mut self) {
         let api = &*self.api;
         let mut sample = Sample::default();
+        let mut buttons: c_int = 0;
         let want = self.shared.forces_requested.load(Ordering::Acquire);
         let force = if want { *self.forces.read() } else { [0.0; 3] };
-        // SAFETY: HD calls from the servo thread inside a frame, on arrays of three doubles.
+        // SAFETY: HD calls from the servo thread inside a frame, on arrays of three doubles
+        // and on one int for the buttons.
         unsafe {
             (api.begin_frame)(self.hhd);
             (api.get_doublev)(hd::HD_CURRENT_POSITION, sample.position_mm.as_mut_ptr());
             (api.get_doublev)(hd::HD_CURRENT_VELOCITY, sample.velocity_mm_s.as_mut_ptr());
+            (api.get_integerv)(hd::HD_CURRENT_BUTTONS, &mut buttons);
             if want != self.enabled {
                 if want {
                     (api.enable)(hd::HD_FORCE_OUTPUT);
@@ -79,6 +88,7 @@ impl Servo {
             (api.set_doublev)(hd::HD_CURRENT_FORCE, force.as_ptr());
             (api.end_frame)(self.hhd);
         }
+        sample.buttons = buttons as u32;
         // SAFETY: reading the error stack; at most a few entries per frame.
         let first = unsafe { (api.get_error)() };
         if first.error_code != hd::HD_SUCCESS {
@@ -264,7 +274,7 @@ impl HapticDevice for OpenHaptics {
         Ok(HapticSample {
             position_mm: Vector3::from(s.position_mm),
             velocity_mm_s: Vector3::from(s.velocity_mm_s),
-            buttons: 0,
+            buttons: s.buttons,
         })
     }
 
