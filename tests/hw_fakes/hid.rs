@@ -1,11 +1,12 @@
 //! The hid backend against a fake libhidapi-hidraw (LD_LIBRARY_PATH, child process)
 //! replaying input reports in the Logitech Extreme 3D Pro's layout: a joystick gives
-//! position only; a HID haptic device gets force output reports, only when they
-//! change and zero when disabled or closed; an unplugged device is lost.
+//! position only, and the switch button when it has one; a HID haptic device gets force
+//! output reports, only when they change and zero when disabled or closed; an unplugged
+//! device is lost.
 use nalgebra::Vector3;
 use nanoforce::hw::haptic::config::{HidAxis, HidConfig, HidForce};
 use nanoforce::hw::haptic::hid::HidHaptic;
-use nanoforce::hw::haptic::{HapticDevice, HapticError};
+use nanoforce::hw::haptic::{HapticDevice, HapticError, SWITCH_BUTTON};
 
 use super::support::{build, fake_dir, in_child, run_child};
 
@@ -47,6 +48,7 @@ fn config(force: Option<HidForce>) -> HidConfig {
             axis(10, 10, 1023, true),
             axis(24, 8, 255, false),
         ],
+        switch_button_bit: None,
         force,
     }
 }
@@ -69,7 +71,10 @@ impl Files {
 }
 
 const CENTRE: &str = "00 02 88 80 00 00 00";
+/// Button 3 held (byte 4 holds buttons 1 to 8).
 const CORNER: &str = "ff 03 80 ff 04 00 00";
+/// The thumb button (2, bit 33) held.
+const THUMB: &str = "00 02 88 80 02 00 00";
 
 #[test]
 #[ignore = "run by hid_devices_through_a_fake_hidapi with the fake hidapi"]
@@ -94,6 +99,7 @@ fn child_hid() {
     let s = stick.read(0.001).unwrap();
     assert_eq!(s.position_mm, Vector3::new(30.0, 30.0, 30.0));
     assert!(s.velocity_mm_s.x > 0.0, "moving: {}", s.velocity_mm_s);
+    assert_eq!(s.buttons, 0, "no switch button configured");
     // Silent afterwards: still there, and still.
     let s = stick.read(0.5).unwrap();
     assert_eq!(s.position_mm, Vector3::new(30.0, 30.0, 30.0));
@@ -115,6 +121,21 @@ fn child_hid() {
         ["open 046d:c215", "close"],
         "a joystick is never written to"
     );
+
+    // The switch button at bit 33: held, another button alone, held again, released;
+    // silent reads keep the newest report's buttons.
+    files.reports(&[THUMB, "-", CORNER, "-", THUMB, "-", "-", CENTRE]);
+    let mut switching = config(None);
+    switching.switch_button_bit = Some(33);
+    let mut stick = HidHaptic::open(&switching).unwrap();
+    let mut buttons = |t| stick.read(t).unwrap().buttons;
+    assert_eq!(buttons(0.000), SWITCH_BUTTON, "held at open");
+    assert_eq!(buttons(0.001), 0, "button 3 is not the switch button");
+    assert_eq!(buttons(0.002), SWITCH_BUTTON);
+    assert_eq!(buttons(0.003), SWITCH_BUTTON, "silent: still held");
+    assert_eq!(buttons(0.004), 0, "released");
+    drop(stick);
+    assert_eq!(files.log(), ["open 046d:c215", "close"]);
 
     // A HID haptic device: force output reports, zero at open, while disabled and at close.
     files.reports(&[CENTRE]);

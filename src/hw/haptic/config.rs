@@ -2,8 +2,8 @@
 //! `"openhaptics"` (a PHANToM through OpenHaptics' HD API, `libHD.so` loaded at run
 //! time) or `"hid"` (a USB-HID device through hidapi: a HID haptic device, or a plain
 //! joystick that gives position without force feedback). For `"hid"` the report layout
-//! comes from `[haptic.x]`, `[haptic.y]`, `[haptic.z]` and, for force output,
-//! `[haptic.force]`.
+//! comes from `[haptic.x]`, `[haptic.y]`, `[haptic.z]`, `switch_button_bit` for the
+//! button that switches probes and, for force output, `[haptic.force]`.
 use serde::Deserialize;
 
 use crate::checks::{Checker, ConfigError, List, Range};
@@ -29,7 +29,8 @@ pub enum HapticBackend {
 pub(crate) enum RawHaptic {
     Sim(NoKeys),
     OpenHaptics(RawOpenHaptics),
-    Hid(RawHid),
+    /// Boxed: its layout outweighs the other backends' keys many times over.
+    Hid(Box<RawHid>),
 }
 
 #[derive(Debug, Deserialize)]
@@ -47,6 +48,7 @@ pub(crate) struct RawHid {
     product_id: Option<i64>,
     report_id: Option<i64>,
     report_length: Option<i64>,
+    switch_button_bit: Option<i64>,
     x: Option<RawHidAxis>,
     y: Option<RawHidAxis>,
     z: Option<RawHidAxis>,
@@ -120,6 +122,10 @@ pub struct HidConfig {
     pub report_id: Option<u8>,
     pub report_length: usize,
     pub axes: [HidAxis; 3],
+    /// The input report bit (offset from the start of the report, as
+    /// [`HidAxis::bit`]) of the button that switches probes: reported as
+    /// [`SWITCH_BUTTON`](super::SWITCH_BUTTON) while it is 1. None: no such button.
+    pub switch_button_bit: Option<usize>,
     /// None: a joystick, position only.
     pub force: Option<HidForce>,
 }
@@ -167,6 +173,13 @@ impl RawHid {
             (1, 1024),
             "bytes",
         )?;
+        let switch_button_bit = self
+            .switch_button_bit
+            .map(|b| {
+                let last = 8 * i64::from(report_length) - 1;
+                in_range(check, "haptic.switch_button_bit", b, (0, last), "").map(|b| b as usize)
+            })
+            .transpose()?;
         let mut axes = Vec::with_capacity(3);
         for (name, raw) in [("x", self.x), ("y", self.y), ("z", self.z)] {
             let key = format!("haptic.{name}");
@@ -180,6 +193,7 @@ impl RawHid {
             report_id,
             report_length: report_length as usize,
             axes: [axes[0], axes[1], axes[2]],
+            switch_button_bit,
             force,
         })
     }
@@ -286,6 +300,40 @@ mod tests {
             (10, 10, false)
         );
         assert!(h.axes[1].invert && h.force.is_none());
+        assert_eq!(h.switch_button_bit, None, "no switch button unless named");
+    }
+
+    #[test]
+    fn hid_switch_button_bit() {
+        let with = |bit: &str| {
+            JOYSTICK.replace(
+                "report_length = 7\n",
+                &format!("report_length = 7\nswitch_button_bit = {bit}\n"),
+            )
+        };
+        let HapticBackend::Hid(h) = parse(&with("33")).unwrap().devices.haptic else {
+            panic!("not hid")
+        };
+        assert_eq!(h.switch_button_bit, Some(33));
+        let HapticBackend::Hid(h) = parse(&with("55")).unwrap().devices.haptic else {
+            panic!("not hid")
+        };
+        assert_eq!(h.switch_button_bit, Some(55), "the report's last bit");
+        assert_eq!(
+            error_of(&with("56")),
+            "lab.toml: haptic.switch_button_bit = 56 is out of range: accepted 0 to 55"
+        );
+        assert_eq!(
+            error_of(&with("-1")),
+            "lab.toml: haptic.switch_button_bit = -1 is out of range: accepted 0 to 55"
+        );
+        let msg = error_of(&JOYSTICK.replace("report_length = 7", "switch_button = 33"));
+        assert_eq!(
+            msg,
+            "lab.toml: haptic.switch_button is not a key of haptic.backend = \"hid\" \
+             (its keys: vendor_id, product_id, report_id, report_length, switch_button_bit, \
+             x, y, z, force)"
+        );
     }
 
     #[test]

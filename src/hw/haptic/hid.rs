@@ -1,7 +1,8 @@
 //! The `"hid"` haptic backend: a USB-HID device through hidapi, its report layout from
-//! `[haptic.x/y/z]` and, for a HID haptic device, `[haptic.force]`. A plain joystick has
-//! no force output: it gives position only, and the log says so, since the operator
-//! then feels nothing of the tip force.
+//! `[haptic.x/y/z]`, the button that switches probes from `switch_button_bit` and, for a
+//! HID haptic device, `[haptic.force]`. A plain joystick has no force output: it gives
+//! position only, and the log says so, since the operator then feels nothing of the tip
+//! force.
 //!
 //! Each 1 kHz `read` drains the reports waiting (non-blocking `hid_read_timeout(0)`,
 //! into a reused buffer) and keeps the newest; `write_force` sends an output report
@@ -10,7 +11,7 @@
 use nalgebra::Vector3;
 
 use super::config::HidConfig;
-use super::hid_report::{force_report_into, position_mm, VelocityEstimator};
+use super::hid_report::{buttons, force_report_into, position_mm, VelocityEstimator};
 use super::hidapi_sys::{Device, HidError};
 use super::{HapticDevice, HapticError, HapticSample};
 
@@ -27,6 +28,8 @@ pub struct HidHaptic {
     device: Device,
     report: Vec<u8>,
     position_mm: Vector3<f64>,
+    /// The newest report's buttons (a device that reports only on change holds them).
+    buttons: u32,
     velocity: VelocityEstimator,
     velocity_mm_s: Vector3<f64>,
     fresh: bool,
@@ -51,6 +54,7 @@ impl HidHaptic {
             device,
             report: vec![0; config.report_length.max(64)],
             position_mm: Vector3::zeros(),
+            buttons: 0,
             velocity: VelocityEstimator::new(0.01),
             velocity_mm_s: Vector3::zeros(),
             fresh: false,
@@ -89,13 +93,15 @@ impl HidHaptic {
         if n == 0 || self.config.report_id.is_some_and(|id| report[0] != id) {
             return false;
         }
-        match position_mm(report, &self.config.axes) {
-            Some(p) => {
+        let position = position_mm(report, &self.config.axes);
+        match (position, buttons(report, self.config.switch_button_bit)) {
+            (Some(p), Some(b)) => {
                 self.position_mm = p;
+                self.buttons = b;
                 self.fresh = true;
                 true
             }
-            None => false,
+            _ => false,
         }
     }
 
@@ -151,7 +157,7 @@ impl HapticDevice for HidHaptic {
         Ok(HapticSample {
             position_mm: self.position_mm,
             velocity_mm_s: self.velocity_mm_s,
-            buttons: 0,
+            buttons: self.buttons,
         })
     }
 

@@ -1,11 +1,13 @@
 //! HID reports as the `"hid"` haptic backend reads and writes them, in plain Rust (no
 //! device needed, so always compiled and unit-tested): stylus axes are little-endian
 //! bit fields of the input report (HID's own bit order), mapped to millimetres; the
-//! force goes out as three little-endian i16 in an output report; velocity is
-//! estimated from successive positions.
+//! button that switches probes is one bit of it; the force goes out as three
+//! little-endian i16 in an output report; velocity is estimated from successive
+//! positions.
 use nalgebra::Vector3;
 
 use super::config::{HidAxis, HidForce};
+use super::SWITCH_BUTTON;
 
 /// The field of `bits` bits starting `bit` bits into `report`, or None if it overruns.
 pub fn field(report: &[u8], bit: usize, bits: u32, signed: bool) -> Option<i64> {
@@ -40,6 +42,17 @@ pub fn position_mm(report: &[u8], axes: &[HidAxis; 3]) -> Option<Vector3<f64>> {
         axis_mm(report, &axes[1])?,
         axis_mm(report, &axes[2])?,
     ))
+}
+
+/// The buttons of a report, as [`HapticSample::buttons`](super::HapticSample::buttons):
+/// [`SWITCH_BUTTON`] while the bit `switch_button_bit` is 1, else 0 (always 0 without
+/// one). None if the report is too short to hold that bit.
+pub fn buttons(report: &[u8], switch_button_bit: Option<usize>) -> Option<u32> {
+    let Some(bit) = switch_button_bit else {
+        return Some(0);
+    };
+    let held = field(report, bit, 1, false)? == 1;
+    Some(if held { SWITCH_BUTTON } else { 0 })
 }
 
 /// Writes the output report for `force_n` into `out` (`report_length` bytes).
@@ -153,6 +166,28 @@ mod tests {
             None,
             "a short report is not used"
         );
+    }
+
+    #[test]
+    fn switch_button_from_its_bit() {
+        // The Extreme 3D Pro's buttons 1 to 8 are byte 4: the thumb button (2) is bit 33.
+        let thumb = [0x00, 0x02, 0x88, 0x80, 0x02, 0x00, 0x00];
+        let others = [0xff, 0xff, 0xff, 0xff, 0xfd, 0xff, 0xff];
+        assert_eq!(buttons(&thumb, Some(33)), Some(SWITCH_BUTTON));
+        assert_eq!(buttons(&others, Some(33)), Some(0), "every other bit set");
+        assert_eq!(buttons(&thumb, Some(32)), Some(0), "the trigger is not it");
+        assert_eq!(
+            buttons(&thumb, None),
+            Some(0),
+            "no switch button configured"
+        );
+        assert_eq!(
+            buttons(&[0xff; 7], Some(55)),
+            Some(SWITCH_BUTTON),
+            "last bit"
+        );
+        assert_eq!(buttons(&thumb[..4], Some(33)), None, "a short report");
+        assert_eq!(buttons(&thumb[..4], None), Some(0));
     }
 
     #[test]

@@ -15,9 +15,9 @@ pub struct HapticSample {
 }
 
 /// The button (its bit in [`HapticSample::buttons`]) that switches the stylus to the
-/// next probe it feels: the PHANToM's second button. Pressing it stops motion until the
-/// stylus is back at the centre (the deadman re-engage), then the stylus drives and
-/// feels the next probe.
+/// next probe it feels: the PHANToM's second button, or on a `hid` device the button at
+/// `switch_button_bit`. Pressing it stops motion until the stylus is back at the centre
+/// (the deadman re-engage), then the stylus drives and feels the next probe.
 pub const SWITCH_BUTTON: u32 = 1 << 1;
 
 #[derive(Debug, thiserror::Error)]
