@@ -32,6 +32,10 @@ Threads: frames (the SEM source) -> tracker (tip angle and force) -> the 1 kHz h
 loop, which reads the stylus, renders the scaled force on top of centring springs and \
 sends the S100 its rate command. Without --config the built-in simulated lab runs \
 (simulated S100, sample, SEM and operator; see config/sim.toml).\n\n\
+Several probes ([[probe]] entries, config/probe.example.toml): each rides its own S100 \
+positioner and is tracked in every frame; the stylus drives and feels one at a time, and \
+its second button switches to the next (motion waits for the re-centred stylus). \
+config/sim-two-probes.toml is the simulated lab of two.\n\n\
 Signals: SIGINT or SIGTERM stop cleanly with the outputs at zero; SIGQUIT, SIGABRT \
 (systemd's watchdog), SIGUSR1, SIGUSR2, SIGALRM and SIGXCPU stop the same way and exit \
 with 128 + the signal's number. SIGHUP reloads the [teleop] and [safety] gains from the \
@@ -41,10 +45,12 @@ One run per state directory and device: a second is refused, naming the first on
 pid. Exit status: 0 a clean stop, 1 refused to start, 70 a thread panicked, 74 the \
 recording failed (a full disk) while control went on, 128 + n a stop signal n.\n\n\
 Under systemd (Type=notify) it reports READY, STATUS and WATCHDOG.\n\n\
-Every run records its telemetry (ticks.csv, estimates.csv, events.log, config.toml, \
-stats.json) in a session folder under the state directory.",
+Every run records its telemetry (ticks.csv, estimates.csv or estimates.<name>.csv per \
+probe, events.log, config.toml, stats.json) in a session folder under the state \
+directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
 nanoforce run --duration-s 30 --stats-json stats.json\n  \
+nanoforce run --config config/sim-two-probes.toml  # two probes, two positioners\n  \
 nanoforce run --config /etc/nanoforce/nanoforce.toml"
 )]
 pub struct RunArgs {
