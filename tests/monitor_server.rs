@@ -3,6 +3,7 @@
 //! live pages are capped (503 past `max_clients`), a page that never reads does not
 //! slow the others, and a closed page frees its place. Afterwards the recording has
 //! overlay thumbnails and `nanoforce report` shows them with the run's loop figures.
+//! With two probes in view the page's frame names each, with its numbers.
 mod monitor_support;
 
 use std::io::{Read, Write};
@@ -292,4 +293,57 @@ fn allow_remote_is_a_warning() {
         line.contains("WARN") && line.contains("allow_remote"),
         "{line}"
     );
+}
+
+/// The lab of two probes (config/sim-two-probes.toml) with its page on `port`: each
+/// update's frame names both probes with their numbers and marks the felt one.
+#[test]
+fn the_page_shows_every_probe() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let two = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml"),
+    )
+    .unwrap();
+    let config = dir.path().join("two.toml");
+    std::fs::write(
+        &config,
+        format!("{two}\n[monitor]\nlisten = \"127.0.0.1:{port}\"\n"),
+    )
+    .unwrap();
+    let mut daemon = start_daemon(dir.path(), &config, 5.0);
+    wait_for_monitor(&mut daemon, port);
+    let (mut events, head) = open_events(port);
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let deadline = Instant::now() + Duration::from_secs(4);
+    let mut text = String::new();
+    let mut buf = [0u8; 65536];
+    let frame = loop {
+        assert!(Instant::now() < deadline, "no update with a frame: {text}");
+        let n = events.read(&mut buf).unwrap_or(0);
+        text.push_str(&String::from_utf8_lossy(&buf[..n]));
+        let found = text
+            .lines()
+            .filter_map(|l| l.strip_prefix("data: "))
+            .filter_map(|d| serde_json::from_str::<serde_json::Value>(d).ok())
+            .find_map(|u| Some(u["frame"].clone()).filter(|f| f["probes"].is_array()));
+        if let Some(frame) = found {
+            break frame;
+        }
+    };
+    let probes = frame["probes"].as_array().unwrap();
+    let names: Vec<&str> = probes.iter().filter_map(|p| p["name"].as_str()).collect();
+    assert_eq!(names, ["left", "right"], "{frame}");
+    let felt: Vec<bool> = probes.iter().map(|p| p["active"] == true).collect();
+    assert_eq!(felt, [true, false], "the first probe is felt: {frame}");
+    assert!(
+        probes.iter().all(|p| p["confidence"].is_number()),
+        "{frame}"
+    );
+    assert_eq!(
+        frame["detected"], probes[0]["detected"],
+        "the top level is the first's"
+    );
+    drop(events);
+    assert!(daemon.wait().unwrap().success());
 }
