@@ -1,6 +1,7 @@
 //! Every live run can be tracked again: a 6 s run of the built-in simulated lab records
 //! its frames, and `nanoforce replay SESSION_DIR` reproduces the live estimates (same
 //! detection, same angle to 1e-6 deg) for at least 99 % of them, matched by frame_seq;
+//! so does a run of two probes, probe by probe;
 //! the session's times are anchored in UTC (session.json, the `utc` columns).
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -36,8 +37,15 @@ fn only_session(state: &Path) -> PathBuf {
 }
 
 fn record_run(state: &Path, seconds: &str) -> PathBuf {
+    record_run_with(state, seconds, &[])
+}
+
+/// A run of `seconds` with `extra` arguments (a `--config`), recorded under `state`.
+fn record_run_with(state: &Path, seconds: &str, extra: &[&str]) -> PathBuf {
     let out = Command::new(BIN)
-        .args(["run", "--quiet", "--duration-s", seconds, "--state-dir"])
+        .args(["run", "--quiet", "--duration-s", seconds])
+        .args(extra)
+        .arg("--state-dir")
         .arg(state)
         .env("RUST_LOG", "warn")
         .env_remove("NOTIFY_SOCKET")
@@ -96,12 +104,37 @@ fn a_recorded_live_run_replays_to_the_same_estimates() {
         std::fs::read(&two_threads).unwrap()
     );
 
-    let live = read_rows(&session.join("estimates.csv"));
-    let replayed: HashMap<String, HashMap<String, String>> = read_rows(&replayed_csv)
+    assert_reproduced(&session.join("estimates.csv"), &replayed_csv, 120);
+}
+
+/// A live run of two probes (config/sim-two-probes.toml) replays to each probe's live
+/// estimates: `estimates.<name>.csv` against the replay's `<csv>.<name>.csv`.
+#[test]
+fn a_recorded_run_of_two_probes_replays_to_each_probe_s_estimates() {
+    let state = tempfile::tempdir().unwrap();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml");
+    let session = record_run_with(state.path(), "3", &["--config", config.to_str().unwrap()]);
+    let err = replay(&session, &state.path().join("replayed.csv"), &[]);
+    assert!(err.contains("left") && err.contains("right"), "{err}");
+    for name in ["left", "right"] {
+        assert_reproduced(
+            &session.join(format!("estimates.{name}.csv")),
+            &state.path().join(format!("replayed.{name}.csv")),
+            60,
+        );
+    }
+}
+
+/// At least 99 % of the live estimates in `live_csv` (more than `min_rows` of them,
+/// most detected) come out of the replay's `replayed_csv` alike: the same detection,
+/// the same angle to 1e-6 deg, the same felt force, the same capture time.
+fn assert_reproduced(live_csv: &Path, replayed_csv: &Path, min_rows: usize) {
+    let live = read_rows(live_csv);
+    let replayed: HashMap<String, HashMap<String, String>> = read_rows(replayed_csv)
         .into_iter()
         .map(|r| (r["frame_seq"].clone(), r))
         .collect();
-    assert!(live.len() > 120, "{} published estimates", live.len());
+    assert!(live.len() > min_rows, "{} published estimates", live.len());
     let mut same = 0;
     let mut detected = 0;
     let mut differences = Vec::new();
