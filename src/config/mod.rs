@@ -525,6 +525,32 @@ window_deg = 10
         );
         let msg = error_of(&format!("{TWO}[probe.daq]\nbackend = \"ni\"\n"));
         assert!(msg.contains("probe[1].daq.backend = \"ni\""), "{msg}");
+        // One output line drives one axis: across positioners, and within one.
+        let both = format!("{TWO}{comedi}").replace(
+            "name = \"left\"\n",
+            &format!(
+                "name = \"left\"\n{}",
+                comedi.replace("channel = 7", "channel = 3")
+            ),
+        );
+        assert!(parse(&both).is_ok(), "channels 3 and 7 differ");
+        let msg = error_of(&both.replace("channel = 3", "channel = 7"));
+        assert!(
+            msg.contains(
+                "probe[1].daq.z and probe[0].daq.z drive the same output \
+                 (/dev/comedi0 subdevice 1 channel 7): each axis needs its own"
+            ),
+            "{msg}"
+        );
+        let twice = comedi.replace(
+            "[probe.daq.y]\noutput = \"none\"",
+            "[probe.daq.y]\noutput = \"analog\"\nsubdevice = 1\nchannel = 7\nvolts_per_um_s = 0.1",
+        );
+        let msg = error_of(&format!("{TWO}{twice}"));
+        assert!(
+            msg.contains("probe[1].daq.z and probe[1].daq.y drive the same output"),
+            "{msg}"
+        );
         // The lone probe's [daq] has no place beside entries.
         let msg = error_of(&format!("[daq]\nbackend = \"sim\"\n{TWO}"));
         assert!(

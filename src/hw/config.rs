@@ -12,6 +12,7 @@
 //! in is checked when the devices are opened ([`super::open::check_compiled`]), so a
 //! configuration can be checked anywhere.
 pub use super::daq::config::DaqBackend;
+use super::daq::config::OutputLine;
 pub use super::frames::config::FramesBackend;
 use super::frames::config::RawFrames;
 pub use super::haptic::config::HapticBackend;
@@ -69,20 +70,47 @@ impl DevicesConfig {
     ) -> Result<DevicesConfig, ConfigError> {
         let frames: RawFrames = tagged(check, "frames", "backend", Some("sim"), frames)?;
         let haptic: RawHaptic = tagged(check, "haptic", "backend", Some("sim"), haptic)?;
+        let positioners = positioners
+            .into_iter()
+            .map(|(section, table)| {
+                Ok(Positioner {
+                    daq: DaqBackend::validate(check, &section, table)?,
+                    section,
+                })
+            })
+            .collect::<Result<Vec<_>, ConfigError>>()?;
+        one_axis_per_line(&positioners, check)?;
         Ok(DevicesConfig {
             frames: frames.validate(check)?,
-            positioners: positioners
-                .into_iter()
-                .map(|(section, table)| {
-                    Ok(Positioner {
-                        daq: DaqBackend::validate(check, &section, table)?,
-                        section,
-                    })
-                })
-                .collect::<Result<_, ConfigError>>()?,
+            positioners,
             haptic: haptic.validate(check)?,
         })
     }
+}
+
+/// No output line drives two axes (of one positioner or of two): their commands would
+/// fight over it.
+fn one_axis_per_line(positioners: &[Positioner], check: &Checker) -> Result<(), ConfigError> {
+    let mut seen: Vec<(String, OutputLine)> = Vec::new();
+    for p in positioners {
+        let DaqBackend::Comedi(c) = &p.daq else {
+            continue;
+        };
+        for (axis, line) in c.lines() {
+            let key = format!("{}.{axis}", p.section);
+            if let Some((first, _)) = seen.iter().find(|(_, l)| *l == line) {
+                return Err(check.inconsistent(format!(
+                    "{key} and {first} drive the same output ({} subdevice {} channel {}): \
+                     each axis needs its own",
+                    line.board.display(),
+                    line.subdevice,
+                    line.channel
+                )));
+            }
+            seen.push((key, line));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

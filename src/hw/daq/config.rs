@@ -137,6 +137,39 @@ pub struct StepDirAxis {
     pub invert_direction: bool,
 }
 
+/// One physical output line of a board: an analog channel, a counter, or a digital
+/// line, by board, subdevice and channel (0 for a counter).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputLine {
+    pub board: PathBuf,
+    pub subdevice: u32,
+    pub channel: u32,
+}
+
+impl ComediConfig {
+    /// Each output line the axes drive, with its axis's name (`x`, `y`, `z`).
+    pub fn lines(&self) -> Vec<(&'static str, OutputLine)> {
+        let names = ["x", "y", "z"];
+        let mut lines = Vec::new();
+        for ((axis, board), name) in self.axes.iter().zip(&self.axis_devices).zip(names) {
+            let line = |subdevice, channel| OutputLine {
+                board: board.clone(),
+                subdevice,
+                channel,
+            };
+            match axis {
+                AxisOutput::None => {}
+                AxisOutput::Analog(a) => lines.push((name, line(a.subdevice, a.channel))),
+                AxisOutput::StepDir(s) => {
+                    lines.push((name, line(s.counter_subdevice, 0)));
+                    lines.push((name, line(s.dio_subdevice, s.direction_channel)));
+                }
+            }
+        }
+        lines
+    }
+}
+
 impl DaqBackend {
     /// Reads and validates a DAQ section as written: `section` names it in messages
     /// (`daq` for the lab's one positioner, `probe[1].daq` for an entry's).
