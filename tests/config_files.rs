@@ -78,8 +78,10 @@ const COUPLED: [(&str, &str, &str, &str); 2] = [
         "[20.0, 20.0, 20.0]",
     ),
 ];
-/// `[min, max]`: its first element cannot take every value alone (min < max).
-const IN_RANGE_UNCHECKED: [&str; 1] = ["daq.x.range_v"];
+/// Keys that cannot take every value of their range alone: `[min, max]`'s first element
+/// (min < max), and an output channel whose range includes the other axis's channel on
+/// the same subdevice (one output line drives one axis).
+const IN_RANGE_UNCHECKED: [&str; 2] = ["daq.x.range_v", "daq.y.channel"];
 
 /// One numeric key of a shipped file.
 #[derive(Debug, Clone)]
