@@ -361,6 +361,25 @@ fn load(path: Option<&Path>) -> anyhow::Result<(Config, String)> {
 /// Below this true peak (nN) the run summary gives force errors without a share of it.
 const MIN_PEAK_FOR_SHARE_NN: f64 = 10.0;
 
+/// A probe's force error against the simulator's truth, when there is one.
+fn force_summary(force: &crate::daemon::stats::ForceStats) -> Option<String> {
+    let (Some(peak), Some(rms), Some(max)) =
+        (force.true_peak_nn, force.rms_error_nn, force.max_error_nn)
+    else {
+        return None;
+    };
+    // A share of a peak means something only once the probe pressed.
+    Some(if peak >= MIN_PEAK_FOR_SHARE_NN {
+        format!(
+            "peak {peak:.0} nN, rms error {rms:.1} nN ({:.2} %), max error {max:.1} nN ({:.2} %)",
+            100.0 * rms / peak,
+            100.0 * max / peak
+        )
+    } else {
+        format!("no press (peak {peak:.1} nN), rms error {rms:.1} nN, max error {max:.1} nN")
+    })
+}
+
 fn summarise(stats: &crate::daemon::stats::RunStats) {
     let l = &stats.haptic_loop;
     let f = &stats.frames;
@@ -381,24 +400,23 @@ fn summarise(stats: &crate::daemon::stats::RunStats) {
         opt(f.latency_ms_p50),
         opt(f.latency_ms_p99),
     );
-    if let (Some(peak), Some(rms), Some(max)) = (
-        stats.force.true_peak_nn,
-        stats.force.rms_error_nn,
-        stats.force.max_error_nn,
-    ) {
-        // A share of a peak means something only once the probe pressed.
-        if peak >= MIN_PEAK_FOR_SHARE_NN {
-            tracing::info!(
-                "force against the simulated truth: peak {peak:.0} nN, rms error {rms:.1} nN \
-                 ({:.2} %), max error {max:.1} nN ({:.2} %)",
-                100.0 * rms / peak,
-                100.0 * max / peak
-            );
-        } else {
-            tracing::info!(
-                "force against the simulated truth: no press (peak {peak:.1} nN), rms error \
-                 {rms:.1} nN, max error {max:.1} nN"
-            );
+    match stats.probes.as_slice() {
+        [_, _, ..] => {
+            for p in &stats.probes {
+                tracing::info!(
+                    "probe {}: detected in {} frames{}",
+                    p.name,
+                    p.frames.detected,
+                    force_summary(&p.force)
+                        .map(|s| format!("; force against the simulated truth: {s}"))
+                        .unwrap_or_default()
+                );
+            }
+        }
+        _ => {
+            if let Some(s) = force_summary(&stats.force) {
+                tracing::info!("force against the simulated truth: {s}");
+            }
         }
     }
     tracing::info!(
