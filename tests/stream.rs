@@ -230,9 +230,10 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
             (0.0..1.0).contains(&age_s),
             "arrived {age_s} s after capture: {v}"
         );
+        assert_eq!(v["probe"], 0, "the lone probe: {v}");
         assert_eq!(
             v.as_object().unwrap().len(),
-            15,
+            16,
             "no field more or less: {v}"
         );
     }
@@ -291,7 +292,8 @@ fn every_estimate_and_the_haptic_state_arrive_with_every_field() {
         number(v, "unix_s");
         parse_utc(v["utc"].as_str().unwrap());
         assert!(v["press_blocked"].is_boolean(), "{v}");
-        assert_eq!(v.as_object().unwrap().len(), 11, "{v}");
+        assert_eq!(v["probe"], 0, "the lone probe is felt: {v}");
+        assert_eq!(v.as_object().unwrap().len(), 12, "{v}");
     }
     let engaged = haptic
         .iter()

@@ -414,6 +414,7 @@ impl HapticLoop {
                 press_blocked: out.press_block.is_some(),
                 gate_held: gate.held,
                 gate_attenuated: gate.attenuated,
+                felt_probe: probe,
             };
             if telemetry_due && self.telemetry.push(record).is_err() {
                 shared.telemetry_dropped.fetch_add(1, Ordering::Relaxed);

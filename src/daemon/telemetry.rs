@@ -156,7 +156,7 @@ impl Files {
             files.ticks,
             "t_s,period_us,pos_x_mm,pos_y_mm,pos_z_mm,force_x_n,force_y_n,force_z_n,\
              vel_x_um_s,vel_y_um_s,vel_z_um_s,rendered_force_nN,state,press_blocked,gate_held,\
-             gate_attenuated,utc"
+             gate_attenuated,utc,felt_probe"
         )?;
         for estimates in &mut files.estimates {
             writeln!(estimates, "{}", results::header())?;
@@ -257,7 +257,12 @@ fn record(mut recorder: Recorder, stop: &AtomicBool) -> io::Result<()> {
 
 fn drain(recorder: &mut Recorder, files: &mut Files) -> io::Result<()> {
     while let Ok(r) = recorder.ticks.pop() {
-        write_tick(&mut files.ticks, &r, &recorder.anchor)?;
+        write_tick(
+            &mut files.ticks,
+            &r,
+            &recorder.anchor,
+            &recorder.probe_names,
+        )?;
     }
     while let Ok(r) = recorder.estimates.pop() {
         let Some(out) = files.estimates.get_mut(r.estimate.probe) else {
@@ -359,13 +364,19 @@ pub fn prune_sessions(budget: &Budget, keep: Option<&Path>) -> Vec<PathBuf> {
     pruned
 }
 
-fn write_tick(out: &mut impl Write, r: &TickRecord, anchor: &UtcAnchor) -> io::Result<()> {
+/// One row of `ticks.csv`; `names`: the probes', in order (the felt one is named).
+fn write_tick(
+    out: &mut impl Write,
+    r: &TickRecord,
+    anchor: &UtcAnchor,
+    names: &[String],
+) -> io::Result<()> {
     let [px, py, pz] = r.position_mm;
     let [fx, fy, fz] = r.force_n;
     let [vx, vy, vz] = r.velocity_um_s;
     writeln!(
         out,
-        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{},{},{},{}",
+        "{:.6},{:.1},{px:.4},{py:.4},{pz:.4},{fx:.5},{fy:.5},{fz:.5},{vx:.4},{vy:.4},{vz:.4},{:.3},{},{},{},{},{},{}",
         r.t_s,
         r.period_us,
         r.rendered_force_nn,
@@ -373,7 +384,8 @@ fn write_tick(out: &mut impl Write, r: &TickRecord, anchor: &UtcAnchor) -> io::R
         u8::from(r.press_blocked),
         r.gate_held,
         r.gate_attenuated,
-        anchor.utc(r.t_s)
+        anchor.utc(r.t_s),
+        names.get(r.felt_probe).map_or("", String::as_str)
     )
 }
 

@@ -17,4 +17,6 @@ pub struct TickRecord {
     /// Estimates the plausibility gate held, and rendered attenuated, so far.
     pub gate_held: u64,
     pub gate_attenuated: u64,
+    /// The probe the stylus feels and drives, by its place among the probes.
+    pub felt_probe: usize,
 }

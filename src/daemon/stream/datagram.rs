@@ -71,6 +71,8 @@ struct EstimateDatagram {
 #[derive(Serialize)]
 struct HapticDatagram {
     kind: &'static str,
+    /// The probe the stylus feels and drives, by its place among the probes.
+    probe: usize,
     seq: u64,
     utc: Utc,
     unix_s: f64,
@@ -127,6 +129,7 @@ impl Format {
         let unix_s = self.anchor.unix_ns(r.t_s) as f64 * 1e-9;
         let datagram = HapticDatagram {
             kind: "haptic",
+            probe: r.felt_probe,
             seq,
             utc: Utc(unix_s),
             unix_s,
@@ -250,11 +253,13 @@ mod tests {
             press_blocked: true,
             gate_held: 0,
             gate_attenuated: 0,
+            felt_probe: 1,
         };
         let mut out = Vec::new();
         format.haptic(&mut out, 3, &record);
         let v = json(&out);
         assert_eq!(v["kind"], "haptic");
+        assert_eq!(v["probe"], 1);
         assert_eq!(v["seq"], 3);
         assert_eq!(v["utc"], "1970-01-01T00:00:01.000000Z");
         assert_eq!(v["state"], SafetyState::Engaged.as_str());
