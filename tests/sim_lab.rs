@@ -23,28 +23,7 @@ static LAB: Mutex<()> = Mutex::new(());
 fn simulated_lab_meets_the_force_and_timing_targets() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
     let config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml")).unwrap();
-    let clock = Clock::start();
-    let devices = lab::open(&config, clock).unwrap();
-    let session = tempfile::tempdir().unwrap();
-    let options = RunOptions {
-        // One press to 3 uN and the hold: approach, press, hold, into the retract.
-        duration: Some(Duration::from_secs(12)),
-        session_dir: Some(session.path().to_path_buf()),
-        // SCHED_FIFO and locked memory as the shipped daemon asks; refused (not root, no
-        // LimitRTPRIO) they are warnings and the loop runs as an ordinary thread.
-        loop_options: config.daemon.loop_options.clone(),
-        clock,
-        ..RunOptions::default()
-    };
-    let steal_before = cpu_ticks();
-    let outcome = Daemon::start(config.teleop.clone(), devices, options)
-        .unwrap()
-        .wait()
-        .unwrap();
-    let steal = steal_fraction(steal_before, cpu_ticks());
-    assert_eq!(outcome.exit, ExitReason::Duration);
-    let s = outcome.stats;
-    eprintln!("{}", serde_json::to_string_pretty(&s).unwrap());
+    let (s, session, steal, realtime) = twelve_seconds(&config);
 
     assert_force_targets(&s.force, 2500.0, "~3 uN");
 
@@ -63,24 +42,21 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
         assert!(len > 0, "{file} recorded");
     }
 
-    assert_timing_targets(&s, steal, outcome.realtime);
+    assert_timing_targets(&s, steal, realtime);
 }
 
-/// config/sim-two-probes.toml: two cantilevers in one view, each on its own positioner,
-/// the scripted operator pressing with `left` while `right` holds a steady contact. The
-/// targets of one probe hold for each: its force against its own true peak, its
-/// detections, its estimates file; and the daemon's timing as with one probe.
-#[test]
-fn two_probes_meet_the_force_and_timing_targets() {
-    let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml");
-    let config = Config::load(&path).unwrap();
+/// Runs `config` for 12 s, recorded: one press to 3 uN and the hold (approach, press,
+/// hold, into the retract). Returns its stats, the session folder, the host's steal
+/// meanwhile and whether the loop ran under SCHED_FIFO.
+fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
     let clock = Clock::start();
-    let devices = lab::open(&config, clock).unwrap();
+    let devices = lab::open(config, clock).unwrap();
     let session = tempfile::tempdir().unwrap();
     let options = RunOptions {
         duration: Some(Duration::from_secs(12)),
         session_dir: Some(session.path().to_path_buf()),
+        // SCHED_FIFO and locked memory as the shipped daemon asks; refused (not root, no
+        // LimitRTPRIO) they are warnings and the loop runs as an ordinary thread.
         loop_options: config.daemon.loop_options.clone(),
         clock,
         ..RunOptions::default()
@@ -92,8 +68,20 @@ fn two_probes_meet_the_force_and_timing_targets() {
         .unwrap();
     let steal = steal_fraction(steal_before, cpu_ticks());
     assert_eq!(outcome.exit, ExitReason::Duration);
-    let s = outcome.stats;
-    eprintln!("{}", serde_json::to_string_pretty(&s).unwrap());
+    eprintln!("{}", serde_json::to_string_pretty(&outcome.stats).unwrap());
+    (outcome.stats, session, steal, outcome.realtime)
+}
+
+/// config/sim-two-probes.toml: two cantilevers in one view, each on its own positioner,
+/// the scripted operator pressing with `left` while `right` holds a steady contact. The
+/// targets of one probe hold for each: its force against its own true peak, its
+/// detections, its estimates file; and the daemon's timing as with one probe.
+#[test]
+fn two_probes_meet_the_force_and_timing_targets() {
+    let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml");
+    let config = Config::load(&path).unwrap();
+    let (s, session, steal, realtime) = twelve_seconds(&config);
     let names: Vec<&str> = s.probes.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(names, ["left", "right"]);
     // The pressing probe reaches the operator's 3 uN; the other holds about 2 uN.
@@ -123,7 +111,7 @@ fn two_probes_meet_the_force_and_timing_targets() {
         );
     }
     assert!(!session.path().join("estimates.csv").exists());
-    assert_timing_targets(&s, steal, outcome.realtime);
+    assert_timing_targets(&s, steal, realtime);
 }
 
 /// The daemon's timing: the loop runs and keeps its typical period, the tracker keeps

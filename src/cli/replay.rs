@@ -117,16 +117,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let (config, config_path) = load_config(&args, session.as_ref())?;
     // The trackers once now, so a bad calibration is reported before anything is
     // written.
-    let references: Vec<Option<&Path>> = config
-        .probes
-        .iter()
-        .map(|p| {
-            p.tracker
-                .calibration
-                .as_ref()
-                .map(|c| c.reference_image.as_path())
-        })
-        .collect();
+    let references = config.reference_images();
     let probes = || match session {
         Some(_) => live_trackers(&config),
         None => probe_trackers(&config),

@@ -124,6 +124,22 @@ impl Config {
     }
 }
 
+impl Config {
+    /// Each probe's reference image, in order (None: a probe calibrated by the simulated
+    /// SEM); probes calibrated on one image are seen at one scale.
+    pub fn reference_images(&self) -> Vec<Option<&Path>> {
+        self.probes
+            .iter()
+            .map(|p| {
+                p.tracker
+                    .calibration
+                    .as_ref()
+                    .map(|c| c.reference_image.as_path())
+            })
+            .collect()
+    }
+}
+
 /// Reading a lab file of one cantilever and the sections a test gives, for the tests of
 /// the sections other modules own (`[frames]`, `[daq]`, `[haptic]`).
 #[cfg(test)]
@@ -561,30 +577,24 @@ window_deg = 10
 
     #[test]
     fn probe_feel_and_place_are_checked() {
-        let msg = error_of(&TWO.replace(
-            "window_deg = 10",
-            "window_deg = 10\n[probe.sim]\nentry = \"top\"",
-        ));
-        assert!(
-            msg.contains("probe[1].sim.entry must be \"left\" or \"right\", got \"top\""),
-            "{msg}"
-        );
-        let msg = error_of(&TWO.replace(
-            "window_deg = 10",
-            "window_deg = 10\n[probe.sim]\napex_at = [0.5, 1.5]",
-        ));
-        assert!(
-            msg.contains("probe[1].sim.apex_at[1] = 1.5 is out of range"),
-            "{msg}"
-        );
-        let msg = error_of(&TWO.replace(
-            "window_deg = 10",
-            "window_deg = 10\n[probe.sim]\nstart_um = -3",
-        ));
-        assert!(
-            msg.contains("probe[1].sim.start_um = -3 is out of range"),
-            "{msg}"
-        );
+        for (sim, expected) in [
+            (
+                "entry = \"top\"",
+                "probe[1].sim.entry must be \"left\" or \"right\", got \"top\"",
+            ),
+            (
+                "apex_at = [0.5, 1.5]",
+                "probe[1].sim.apex_at[1] = 1.5 is out of range",
+            ),
+            (
+                "start_um = -3",
+                "probe[1].sim.start_um = -3 is out of range",
+            ),
+        ] {
+            let with = format!("window_deg = 10\n[probe.sim]\n{sim}");
+            let msg = error_of(&TWO.replace("window_deg = 10", &with));
+            assert!(msg.contains(expected), "{msg}");
+        }
         let msg = error_of(&TWO.replace("name = \"needle\"", "name = \"needle\"\nfelt = true"));
         assert!(
             msg.contains("probe[1].felt needs the probe's [cantilever]"),

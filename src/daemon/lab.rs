@@ -230,17 +230,7 @@ pub fn probe_trackers(config: &Config) -> anyhow::Result<ProbeSet> {
         .iter()
         .map(|probe| tracker_from_config(config, probe))
         .collect::<anyhow::Result<Vec<Tracker>>>()?;
-    let references: Vec<Option<&std::path::Path>> = config
-        .probes
-        .iter()
-        .map(|p| {
-            p.tracker
-                .calibration
-                .as_ref()
-                .map(|c| c.reference_image.as_path())
-        })
-        .collect();
-    Ok(ProbeSet::new(trackers, &references))
+    Ok(ProbeSet::new(trackers, &config.reference_images()))
 }
 
 /// The tracker of one probe of `config`, calibrated on its `[tracker.calibration]`
