@@ -1,5 +1,9 @@
 //! The report page: one self-contained HTML file (styles inline, every picture a base64
 //! `data:` URI), so it opens in any browser with no network and can be mailed as is.
+//!
+//! Its order: the summary table, one section per probe of a session of several (its
+//! name as heading, its summary rows and plots), the figures the probes share, the
+//! thumbnails, the events.
 use std::fmt::Write as _;
 
 /// A picture for the page, PNG-encoded.
@@ -9,15 +13,27 @@ pub struct Figure {
     pub caption: String,
 }
 
+/// One probe's part of the page (a session of several probes).
+pub struct Section {
+    /// The probe's name.
+    pub heading: String,
+    /// Its (quantity, value) rows.
+    pub summary: Vec<(String, String)>,
+    pub figures: Vec<Figure>,
+}
+
 /// What the page shows.
 pub struct Page<'a> {
     pub title: String,
     pub subtitle: String,
     /// (quantity, value) rows of the summary table.
     pub summary: &'a [(String, String)],
+    /// One per probe of a session of several; none for a lone probe.
+    pub sections: &'a [Section],
+    /// The figures of the whole session (of a lone probe: all of them).
     pub figures: &'a [Figure],
-    /// Thumbnails: (PNG, caption).
-    pub thumbnails: &'a [(Vec<u8>, String)],
+    /// Thumbnails: (PNG, caption lines).
+    pub thumbnails: &'a [(Vec<u8>, Vec<String>)],
     pub notes: &'a [String],
     pub events: &'a [String],
 }
@@ -49,39 +65,35 @@ pub fn render(page: &Page) -> String {
         let _ = writeln!(html, "<p class=\"note\">{}</p>", escape(note));
     }
     html.push_str("<h2>Summary</h2>\n<table id=\"summary\">\n");
-    for (key, value) in page.summary {
-        let _ = writeln!(
-            html,
-            "<tr><td>{}</td><td>{}</td></tr>",
-            escape(key),
-            escape(value)
-        );
-    }
+    rows(&mut html, page.summary);
     html.push_str("</table>\n");
-    for f in page.figures {
+    for section in page.sections {
+        let name = escape(&section.heading);
         let _ = writeln!(
             html,
-            "<h2>{}</h2>\n<figure><img alt=\"{}\" src=\"data:image/png;base64,{}\">\
-             <figcaption>{}</figcaption></figure>",
-            escape(&f.title),
-            escape(&f.title),
-            base64(&f.png),
-            escape(&f.caption)
+            "<section class=\"probe\" id=\"probe-{name}\">\n<h2>{name}</h2>\n\
+             <table id=\"summary-{name}\">"
         );
+        rows(&mut html, &section.summary);
+        html.push_str("</table>\n");
+        figures(&mut html, &section.figures, "h3");
+        html.push_str("</section>\n");
     }
+    figures(&mut html, page.figures, "h2");
     if !page.thumbnails.is_empty() {
         html.push_str(
             "<h2>Frames</h2>\n<p class=\"sub\">Found edges: red (beam), blue (pyramid back \
              face), green (front face); the yellow circle is the apex.</p>\n<div class=\"strip\">\n",
         );
         for (png, caption) in page.thumbnails {
+            let lines: Vec<String> = caption.iter().map(|l| escape(l)).collect();
             let _ = writeln!(
                 html,
                 "<figure><img alt=\"{}\" src=\"data:image/png;base64,{}\">\
                  <figcaption>{}</figcaption></figure>",
-                escape(caption),
+                lines.join(" "),
                 base64(png),
-                escape(caption)
+                lines.join("<br>")
             );
         }
         html.push_str("</div>\n");
@@ -95,6 +107,33 @@ pub fn render(page: &Page) -> String {
     }
     html.push_str("</body></html>\n");
     html
+}
+
+/// The (quantity, value) rows of a table.
+fn rows(html: &mut String, rows: &[(String, String)]) {
+    for (key, value) in rows {
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td>{}</td></tr>",
+            escape(key),
+            escape(value)
+        );
+    }
+}
+
+/// Each figure under its title, a heading of level `heading`.
+fn figures(html: &mut String, figures: &[Figure], heading: &str) {
+    for f in figures {
+        let _ = writeln!(
+            html,
+            "<{heading}>{}</{heading}>\n<figure><img alt=\"{}\" src=\"data:image/png;base64,{}\">\
+             <figcaption>{}</figcaption></figure>",
+            escape(&f.title),
+            escape(&f.title),
+            base64(&f.png),
+            escape(&f.caption)
+        );
+    }
 }
 
 /// Text safe inside HTML elements and attribute values.
@@ -163,6 +202,7 @@ mod tests {
             title: "<script>".into(),
             subtitle: String::new(),
             summary: &[("k".into(), "<v>".into())],
+            sections: &[],
             figures: &[],
             thumbnails: &[],
             notes: &[],

@@ -117,6 +117,7 @@ pub fn write_report(options: &ReportOptions) -> Result<ReportOutput, ReportError
         title: format!("nanoforce session {}", display_name(&data.dir)),
         subtitle: subtitle(&data),
         summary: &summary,
+        sections: &[],
         figures: &figures,
         thumbnails: &strip,
         notes: &notes,

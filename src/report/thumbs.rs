@@ -23,11 +23,15 @@ use crate::vision::{draw_overlays, EdgeFit, Estimate};
 /// Width of one thumbnail, pixels.
 pub const THUMB_WIDTH: u32 = 320;
 
+/// Height of a caption line in the strip, pixels.
+const LINE_PX: u32 = 16;
+
 /// One picture of the strip.
 #[derive(Debug, Clone)]
 pub struct Thumbnail {
     pub image: RgbImage,
-    pub caption: String,
+    /// Its lines.
+    pub caption: Vec<String>,
 }
 
 /// Up to `max` thumbnails, and a note when the strip is missing or incomplete.
@@ -68,7 +72,7 @@ fn from_frames(
         match load_gray(&path) {
             Ok(frame) => out.push(Thumbnail {
                 image: overlay_thumbnail(&frame, &estimate_of(row)),
-                caption: caption(row, data.timed),
+                caption: vec![caption(row, data.timed)],
             }),
             Err(_) => missing += 1,
         }
@@ -161,7 +165,7 @@ fn from_recording(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<Str
         );
         out.push(Thumbnail {
             image: shrink(&image.into_rgb8()),
-            caption,
+            caption: vec![caption],
         });
     }
     (out, None)
@@ -225,15 +229,18 @@ fn caption(row: &FrameRow, timed: bool) -> String {
 pub fn strip(thumbs: &[Thumbnail], columns: usize) -> Option<RgbImage> {
     let columns = columns.max(1);
     let cell_w = thumbs.iter().map(|t| t.image.width()).max()? + 10;
-    let cell_h = thumbs.iter().map(|t| t.image.height()).max()? + 30;
+    let lines = thumbs.iter().map(|t| t.caption.len()).max()?.max(1) as u32;
+    let cell_h = thumbs.iter().map(|t| t.image.height()).max()? + 14 + LINE_PX * lines;
     let rows = thumbs.len().div_ceil(columns) as u32;
     let cols = thumbs.len().min(columns) as u32;
     let mut img = RgbImage::from_pixel(cols * cell_w, rows * cell_h, Rgb([255, 255, 255]));
     for (k, t) in thumbs.iter().enumerate() {
         let (x, y) = ((k % columns) as u32 * cell_w, (k / columns) as u32 * cell_h);
         imageops::overlay(&mut img, &t.image, i64::from(x + 5), i64::from(y + 5));
-        let text_y = (y + 8 + t.image.height()) as i32;
-        plot::small_text(&mut img, x as i32 + 5, text_y, &t.caption);
+        for (k, line) in t.caption.iter().enumerate() {
+            let text_y = (y + 8 + t.image.height() + LINE_PX * k as u32) as i32;
+            plot::small_text(&mut img, x as i32 + 5, text_y, line);
+        }
     }
     Some(img)
 }
