@@ -17,6 +17,13 @@ histogram of the processing time per frame, a strip of overlay thumbnails (found
 red, blue and green, apex marked) and a summary table: frames, detected, accuracy against \
 truth.csv when the session has one (`nanoforce score`'s definitions), and for a recording the \
 loop, latency and safety figures of its stats.json.\n\n\
+A session of several probes (a configuration with [[probe]] entries) gets a section per \
+probe, headed by its name: its summary rows (detected, accuracy against its own \
+truth.<name>.csv, a recording's force numbers of the probe in stats.json) and its two \
+plots; the processing-time histogram, the thumbnails (every probe drawn), the loop and \
+latency figures and the events show once. Its results are read per probe: \
+replay.<name>.csv (named from --csv) or estimates.<name>.csv, the names from probe.toml or \
+the recording's config.toml.\n\n\
 SESSION_DIR is either\n\
 - a replayed session: the layout of docs/conventions.md (probe.toml, reference.png, frames/, maybe \
 truth.csv) with the CSV of `nanoforce replay` in SESSION_DIR/replay.csv (or --csv); \
@@ -53,10 +60,17 @@ pub fn run(args: ReportArgs) -> anyhow::Result<ExitCode> {
     for note in &output.notes {
         tracing::warn!("{note}");
     }
+    let detected = match output.detected.as_slice() {
+        [(_, n)] => format!("{n} detected"),
+        several => several
+            .iter()
+            .map(|(name, n)| format!("{name} {n} detected"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    };
     eprintln!(
-        "report of {} frames ({} detected, {} thumbnails): {}",
+        "report of {} frames ({detected}, {} thumbnails): {}",
         output.frames,
-        output.detected,
         output.thumbnails,
         output.html.display()
     );

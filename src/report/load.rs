@@ -5,17 +5,26 @@
 //!   by default `replay.csv` in the folder. Time comes from `truth.csv`'s `t_s` when there
 //!   is one, else the frame index.
 //! - **recorded** by `nanoforce run`: `estimates.csv` (one row per tracked frame, time
-//!   `frame_time_s`), `stats.json`, `events.log` and, when the run recorded them,
-//!   overlay thumbnails in `thumbnails/`.
+//!   `frame_time_s`), `config.toml`, `stats.json`, `events.log` and, when the run
+//!   recorded them, overlay thumbnails in `thumbnails/`.
 //!
-//! Both CSVs are the one estimate schema, read by [`read_results`]; an `estimates.csv`
-//! from before it had a `frame` column is named by `frame_seq`.
+//! The probes come from the session's configuration (`probe.toml` replayed, `config.toml`
+//! recorded): a lone probe's results are the files above; of several probes (`[[probe]]`
+//! entries), each has its own, named by [`per_probe`] (`replay.<name>.csv`,
+//! `estimates.<name>.csv`, `truth.<name>.csv`), and a file the configuration implies but
+//! the folder lacks is an error naming it. A session without a configuration, or whose
+//! configuration does not load while its lone results file is there, is read as one
+//! probe, its pixels counted from their centre.
+//!
+//! Every results CSV is the one estimate schema, read by [`read_results`]; an
+//! `estimates.csv` from before it had a `frame` column is named by `frame_seq`.
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::ReportError;
-use crate::config::{Config, PixelOrigin};
-use crate::session::results::{read_results, ResultRow};
+use crate::config::{Config, PixelOrigin, SINGLE_NAME};
+use crate::session::live::{is_live_session, CONFIG_FILE};
+use crate::session::results::{per_probe, read_results, ResultRow};
 use crate::session::score::{read_truth, score, Score, TruthRow};
 
 /// One tracked frame, whichever shape the session has.
@@ -46,8 +55,23 @@ pub struct FrameRow {
 /// Which shape the session has.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Kind {
-    Replayed { csv: PathBuf, frames_dir: PathBuf },
+    Replayed { frames_dir: PathBuf },
     Recorded,
+}
+
+/// One probe of the session and what the report knows of it.
+#[derive(Debug, Clone)]
+pub struct ProbeData {
+    /// Its name in the configuration (`probe` for a lone probe given at the top level).
+    pub name: String,
+    /// Its results file.
+    pub csv: PathBuf,
+    /// One per frame of its results file.
+    pub rows: Vec<FrameRow>,
+    /// Its truth file (a replayed session with truth: `truth.csv`, `truth.<name>.csv`).
+    pub truth: Option<PathBuf>,
+    /// Its results scored against that truth.
+    pub score: Option<Score>,
 }
 
 /// Everything the report shows.
@@ -55,15 +79,33 @@ pub enum Kind {
 pub struct SessionData {
     pub dir: PathBuf,
     pub kind: Kind,
-    pub rows: Vec<FrameRow>,
+    /// Every probe, in the configuration's order; at least one.
+    pub probes: Vec<ProbeData>,
     /// True when `t` is seconds (else frame indices).
     pub timed: bool,
-    pub score: Option<Score>,
     pub stats: Option<serde_json::Value>,
     pub events: Vec<String>,
 }
 
-/// Reads `dir`; `csv` overrides where a replayed session's results are.
+impl SessionData {
+    /// The session's frames: the first probe's rows (every probe has a row for every
+    /// tracked frame, in the same order).
+    pub fn frames(&self) -> &[FrameRow] {
+        &self.probes[0].rows
+    }
+
+    /// True for a session of several probes (one part of the page each).
+    pub fn several(&self) -> bool {
+        self.probes.len() > 1
+    }
+}
+
+/// The results file of a recorded session's lone probe; of several, each probe's
+/// name goes before its extension ([`per_probe`]).
+const ESTIMATES_FILE: &str = "estimates.csv";
+
+/// Reads `dir`; `csv` overrides where a replayed session's results are (the lone
+/// probe's file, or the name each probe's file is made from).
 pub fn load(dir: &Path, csv: Option<&Path>) -> Result<SessionData, ReportError> {
     if !dir.is_dir() {
         return Err(ReportError::NotASession {
@@ -71,79 +113,174 @@ pub fn load(dir: &Path, csv: Option<&Path>) -> Result<SessionData, ReportError> 
             reason: "no such folder".into(),
         });
     }
-    let estimates = dir.join("estimates.csv");
-    if csv.is_none() && estimates.is_file() {
-        return load_recorded(dir, &estimates);
+    let estimates = dir.join(ESTIMATES_FILE);
+    if csv.is_none() && (estimates.is_file() || is_live_session(dir)) {
+        let config = dir.join(CONFIG_FILE);
+        let probes = probe_files(&config, &estimates)?;
+        for (probe, path) in &probes {
+            if !path.is_file() && probes.len() > 1 {
+                return Err(missing(path, probe, &config));
+            }
+        }
+        return load_recorded(dir, &probes);
     }
     let csv = csv.map_or_else(|| dir.join("replay.csv"), Path::to_path_buf);
-    if !csv.is_file() {
+    // A recorded session replayed again (`--csv`) has its configuration as config.toml.
+    let config = [dir.join("probe.toml"), dir.join(CONFIG_FILE)]
+        .into_iter()
+        .find(|c| c.is_file())
+        .unwrap_or_else(|| dir.join("probe.toml"));
+    let probes = probe_files(&config, &csv)?;
+    let found = probes.iter().filter(|(_, path)| path.is_file()).count();
+    if found == 0 {
+        let files: Vec<String> = probes
+            .iter()
+            .map(|(_, path)| path.display().to_string())
+            .collect();
+        let what = match probes.len() {
+            1 => "the CSV of `nanoforce replay`".to_string(),
+            _ => format!(
+                "the CSVs of `nanoforce replay` for the probes of {}",
+                config.display()
+            ),
+        };
         return Err(ReportError::NotASession {
             dir: dir.to_path_buf(),
             reason: format!(
-                "neither estimates.csv (a recording of `nanoforce run`) nor {} (the CSV of \
-                 `nanoforce replay`; give another with --csv)",
-                csv.display()
+                "neither estimates.csv (a recording of `nanoforce run`) nor {} ({what}; give \
+                 another with --csv)",
+                files.join(", ")
             ),
         });
     }
-    load_replayed(dir, &csv)
+    if let Some((probe, path)) = probes.iter().find(|(_, path)| !path.is_file()) {
+        return Err(missing(path, probe, &config));
+    }
+    load_replayed(dir, &probes)
 }
 
-fn load_replayed(dir: &Path, csv: &Path) -> Result<SessionData, ReportError> {
-    let results = read_results(csv)?;
-    let origin = pixel_origin_of(&dir.join("probe.toml"));
-    let truth_path = dir.join("truth.csv");
-    let truth = if truth_path.is_file() {
-        Some(read_truth(&truth_path)?)
-    } else {
-        None
+/// A probe as the session's configuration gives it.
+#[derive(Debug, Clone)]
+struct Probe {
+    name: String,
+    /// Where the pixels of its CSV count from (`tracker.pixel_origin`).
+    origin: PixelOrigin,
+}
+
+/// The session's probes, each with its results file made from `csv` by [`per_probe`]:
+/// those of `config`, or one probe counting pixels from their centre (the default) when
+/// there is no configuration, or it does not load while `csv` is there (the replay or
+/// run that wrote the CSV would have refused such a file).
+fn probe_files(config: &Path, csv: &Path) -> Result<Vec<(Probe, PathBuf)>, ReportError> {
+    let lone = || {
+        let probe = Probe {
+            name: SINGLE_NAME.to_string(),
+            origin: PixelOrigin::Centre,
+        };
+        Ok(vec![(probe, csv.to_path_buf())])
     };
-    let by_name: HashMap<&str, &TruthRow> = truth
-        .iter()
-        .flatten()
-        .map(|t| (t.frame.as_str(), t))
-        .collect();
-    let truth_of = |r: &ResultRow| by_name.get(r.frame.as_str()).copied();
-    let timed = !results.is_empty()
-        && results
-            .iter()
-            .all(|r| truth_of(r).is_some_and(|t| t.t_s.is_some()));
-    let rows = results
-        .iter()
-        .enumerate()
-        .map(|(k, r)| {
-            let t = truth_of(r);
-            let mut row = frame_row(
-                r,
-                origin,
-                t.and_then(|t| t.t_s).filter(|_| timed).unwrap_or(k as f64),
-            );
-            if let Some(t) = t.filter(|t| t.detected) {
-                row.true_angle_deg = Some(t.angle_deg).filter(|a| a.is_finite());
-                row.true_force_nn = Some(t.force_nn).filter(|f| f.is_finite());
+    if !config.is_file() {
+        return lone();
+    }
+    let config = match Config::load(config) {
+        Ok(config) => config,
+        Err(_) if csv.is_file() => return lone(),
+        Err(e) => return Err(e.into()),
+    };
+    let names: Vec<&str> = config.probes.iter().map(|p| p.name.as_str()).collect();
+    Ok(per_probe(csv, &names)
+        .into_iter()
+        .zip(&config.probes)
+        .map(|((name, path), p)| {
+            let probe = Probe {
+                name,
+                origin: p.tracker.pixel_origin,
+            };
+            (probe, path)
+        })
+        .collect())
+}
+
+fn missing(path: &Path, probe: &Probe, config: &Path) -> ReportError {
+    ReportError::MissingProbe {
+        path: path.to_path_buf(),
+        probe: probe.name.clone(),
+        config: config.to_path_buf(),
+    }
+}
+
+fn load_replayed(dir: &Path, probes: &[(Probe, PathBuf)]) -> Result<SessionData, ReportError> {
+    let names: Vec<&str> = probes.iter().map(|(p, _)| p.name.as_str()).collect();
+    let truths = per_probe(&dir.join("truth.csv"), &names);
+    let mut read = Vec::with_capacity(probes.len());
+    for ((probe, csv), (_, truth_path)) in probes.iter().zip(truths) {
+        let results = read_results(csv)?;
+        let truth = if truth_path.is_file() {
+            Some((read_truth(&truth_path)?, truth_path))
+        } else {
+            None
+        };
+        read.push((probe, csv, results, truth));
+    }
+    // Seconds when every frame of every probe has its truth's time.
+    let timed = read.iter().all(|(_, _, results, truth)| {
+        let by_name = truth_by_name(truth.as_ref().map(|(t, _)| t.as_slice()));
+        !results.is_empty()
+            && results.iter().all(|r| {
+                by_name
+                    .get(r.frame.as_str())
+                    .is_some_and(|t| t.t_s.is_some())
+            })
+    });
+    let probes = read
+        .into_iter()
+        .map(|(probe, csv, results, truth)| {
+            let by_name = truth_by_name(truth.as_ref().map(|(t, _)| t.as_slice()));
+            let rows = results
+                .iter()
+                .enumerate()
+                .map(|(k, r)| {
+                    let t = by_name.get(r.frame.as_str()).copied();
+                    let mut row = frame_row(
+                        r,
+                        probe.origin,
+                        t.and_then(|t| t.t_s).filter(|_| timed).unwrap_or(k as f64),
+                    );
+                    if let Some(t) = t.filter(|t| t.detected) {
+                        row.true_angle_deg = Some(t.angle_deg).filter(|a| a.is_finite());
+                        row.true_force_nn = Some(t.force_nn).filter(|f| f.is_finite());
+                    }
+                    row
+                })
+                .collect();
+            ProbeData {
+                name: probe.name.clone(),
+                csv: csv.clone(),
+                rows,
+                score: truth.as_ref().map(|(t, _)| score(t, &results)),
+                truth: truth.map(|(_, path)| path),
             }
-            row
         })
         .collect();
     Ok(SessionData {
         dir: dir.to_path_buf(),
         kind: Kind::Replayed {
-            csv: csv.to_path_buf(),
             frames_dir: dir.join("frames"),
         },
-        rows,
+        probes,
         timed,
-        score: truth.as_ref().map(|t: &Vec<TruthRow>| score(t, &results)),
         stats: None,
         events: Vec::new(),
     })
 }
 
-/// Where the pixels of a session's CSV count from: its configuration's
-/// `tracker.pixel_origin`, or the pixel centre (the default) when the file is missing or
-/// does not load (the replay or run that wrote the CSV would have refused such a file).
-fn pixel_origin_of(config: &Path) -> PixelOrigin {
-    Config::load(config).map_or(PixelOrigin::Centre, |c| c.probes[0].tracker.pixel_origin)
+/// A truth file's rows by frame name.
+fn truth_by_name(truth: Option<&[TruthRow]>) -> HashMap<&str, &TruthRow> {
+    truth
+        .into_iter()
+        .flatten()
+        .map(|t| (t.frame.as_str(), t))
+        .collect()
 }
 
 /// A row of the estimate CSV as the report draws it, its pixels in the conventions' frame
@@ -167,25 +304,34 @@ fn frame_row(r: &ResultRow, origin: PixelOrigin, t: f64) -> FrameRow {
     }
 }
 
-fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportError> {
-    let results = read_results(estimates)?;
-    let origin = pixel_origin_of(&dir.join("config.toml"));
-    let mut rows = Vec::with_capacity(results.len());
-    for r in &results {
-        let Some(t) = r.time_s else {
-            return Err(ReportError::Format {
-                path: estimates.to_path_buf(),
-                reason: format!("frame {}: no frame_time_s", r.frame),
+fn load_recorded(dir: &Path, probes: &[(Probe, PathBuf)]) -> Result<SessionData, ReportError> {
+    let mut data = Vec::with_capacity(probes.len());
+    for (probe, estimates) in probes {
+        let results = read_results(estimates)?;
+        let mut rows = Vec::with_capacity(results.len());
+        for r in &results {
+            let Some(t) = r.time_s else {
+                return Err(ReportError::Format {
+                    path: estimates.clone(),
+                    reason: format!("frame {}: no frame_time_s", r.frame),
+                });
+            };
+            rows.push(FrameRow {
+                name: format!(
+                    "frame {}",
+                    r.frame_seq.map_or("?".into(), |s| s.to_string())
+                ),
+                true_force_nn: r.true_force_nn,
+                frame_seq: r.frame_seq,
+                ..frame_row(r, probe.origin, t)
             });
-        };
-        rows.push(FrameRow {
-            name: format!(
-                "frame {}",
-                r.frame_seq.map_or("?".into(), |s| s.to_string())
-            ),
-            true_force_nn: r.true_force_nn,
-            frame_seq: r.frame_seq,
-            ..frame_row(r, origin, t)
+        }
+        data.push(ProbeData {
+            name: probe.name.clone(),
+            csv: estimates.clone(),
+            rows,
+            truth: None,
+            score: None,
         });
     }
     let stats = std::fs::read_to_string(dir.join("stats.json"))
@@ -197,9 +343,8 @@ fn load_recorded(dir: &Path, estimates: &Path) -> Result<SessionData, ReportErro
     Ok(SessionData {
         dir: dir.to_path_buf(),
         kind: Kind::Recorded,
-        rows,
+        probes: data,
         timed: true,
-        score: None,
         stats,
         events,
     })
@@ -222,7 +367,7 @@ mod tests {
              2,4,0.066667,0.090000,0,,,,,0.1000,3.900,\n",
         )
         .unwrap();
-        let rows = load(dir.path(), None).unwrap().rows;
+        let rows = load(dir.path(), None).unwrap().probes.remove(0).rows;
         assert_eq!(rows.len(), 2);
         assert_eq!((rows[0].frame_seq, rows[0].t), (Some(3), 0.05));
         assert_eq!(rows[0].name, "frame 3");
@@ -268,7 +413,7 @@ mod tests {
                 ),
             )
             .unwrap();
-            load(dir.path(), None).unwrap().rows[0].clone()
+            load(dir.path(), None).unwrap().probes[0].rows[0].clone()
         };
         let centre = config("centre");
         assert_eq!(centre.tip_px, Some([100.5, 200.75]));

@@ -5,7 +5,16 @@
 //! `nanoforce score`'s definitions when there is one; loop and latency figures of a
 //! recording). Every plot is also written as a PNG file beside the page.
 //!
-//! - [`load`]: the two session shapes (replayed, recorded) read into one table of frames;
+//! A session of several probes gets one part of the page per probe, headed by its name:
+//! its summary rows (detected, accuracy against its own truth, for a recording its force
+//! numbers of `stats.json`), its force and angle plot and its detection plot (files
+//! named as its results: `force_angle.<name>.png`, `detection.<name>.png`). What the
+//! probes share shows once: frames, duration and processing time, the histogram, the
+//! thumbnails (every probe drawn on each), the loop and latency figures and the events.
+//! A lone probe's page has no such parts.
+//!
+//! - [`load`]: the two session shapes (replayed, recorded) read into one table of frames
+//!   per probe;
 //! - [`plot`]: the plots, drawn in pure Rust with an embedded font;
 //! - [`thumbs`]: the thumbnail strip;
 //! - [`html`]: the page (base64 `data:` URIs; no network, no scripts).
@@ -20,10 +29,11 @@ use std::path::{Path, PathBuf};
 
 use image::{ImageFormat, RgbImage};
 
-use self::html::{Figure, Page};
-use self::load::{FrameRow, Kind, SessionData};
+use self::html::{Figure, Page, Section};
+use self::load::{FrameRow, Kind, ProbeData, SessionData};
 use self::plot::{Panel, Series, Style, BLUE, GREEN, ORANGE, RED};
-use crate::session::results::ResultsError;
+use crate::config::ConfigError;
+use crate::session::results::{per_probe, ResultsError};
 
 /// The report could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -32,6 +42,14 @@ pub enum ReportError {
     NotASession { dir: PathBuf, reason: String },
     #[error(transparent)]
     Results(#[from] ResultsError),
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("{path}: no such file: the results of probe {probe:?}, named in {config}")]
+    MissingProbe {
+        path: PathBuf,
+        probe: String,
+        config: PathBuf,
+    },
     #[error("{path}: cannot read: {source}")]
     Read {
         path: PathBuf,
@@ -57,7 +75,8 @@ pub struct ReportOptions {
     pub session_dir: PathBuf,
     /// Default: `SESSION_DIR/report/`.
     pub out_dir: Option<PathBuf>,
-    /// The replay CSV of a replayed session; default `SESSION_DIR/replay.csv`.
+    /// The replay CSV of a replayed session; default `SESSION_DIR/replay.csv`. Of a
+    /// session of several probes, each probe's file is named from it (`replay.<name>.csv`).
     pub csv: Option<PathBuf>,
     /// Most thumbnails in the strip.
     pub thumbnails: usize,
@@ -68,8 +87,10 @@ pub struct ReportOptions {
 pub struct ReportOutput {
     pub html: PathBuf,
     pub pngs: Vec<PathBuf>,
+    /// The session's frames ([`SessionData::frames`]).
     pub frames: usize,
-    pub detected: usize,
+    /// Each probe's name and the frames it was detected in.
+    pub detected: Vec<(String, usize)>,
     pub thumbnails: usize,
     pub notes: Vec<String>,
 }
@@ -88,18 +109,36 @@ pub fn write_report(options: &ReportOptions) -> Result<ReportOutput, ReportError
         source,
     })?;
     let mut notes = Vec::new();
-    let mut figures = Vec::new();
     let mut pngs = Vec::new();
-    for (file, title, caption, image) in plots(&data, &mut notes) {
-        let png = encode(&image, file)?;
-        let path = out_dir.join(file);
+    let mut figure = |(file, title, caption, image): Plot| -> Result<Figure, ReportError> {
+        let png = encode(&image, &file)?;
+        let path = out_dir.join(&file);
         write(&path, &png)?;
         pngs.push(path);
-        figures.push(Figure {
+        Ok(Figure {
             title: title.into(),
             png,
             caption,
-        });
+        })
+    };
+    // A lone probe's plots are the page's; several probes get a part each.
+    let mut figures = Vec::new();
+    let mut sections = Vec::new();
+    for (k, probe) in data.probes.iter().enumerate() {
+        let plots = probe_plots(&data, k);
+        let plots = plots.into_iter().map(&mut figure);
+        if data.several() {
+            sections.push(Section {
+                heading: probe.name.clone(),
+                summary: summary::probe_table(&data, k),
+                figures: plots.collect::<Result<_, _>>()?,
+            });
+        } else {
+            figures = plots.collect::<Result<_, _>>()?;
+        }
+    }
+    if let Some(latency) = latency_plot(&data, &mut notes) {
+        figures.push(figure(latency)?);
     }
     let (thumbs, note) = thumbs::thumbnails(&data, options.thumbnails);
     notes.extend(note);
@@ -112,12 +151,16 @@ pub fn write_report(options: &ReportOptions) -> Result<ReportOutput, ReportError
         write(&path, &encode(&picture, "thumbnails.png")?)?;
         pngs.push(path);
     }
-    let summary = summary::table(&data);
+    let summary = if data.several() {
+        summary::shared_table(&data)
+    } else {
+        summary::table(&data)
+    };
     let page = Page {
         title: format!("nanoforce session {}", display_name(&data.dir)),
         subtitle: subtitle(&data),
         summary: &summary,
-        sections: &[],
+        sections: &sections,
         figures: &figures,
         thumbnails: &strip,
         notes: &notes,
@@ -128,8 +171,12 @@ pub fn write_report(options: &ReportOptions) -> Result<ReportOutput, ReportError
     Ok(ReportOutput {
         html: html_path,
         pngs,
-        frames: data.rows.len(),
-        detected: data.rows.iter().filter(|r| r.detected).count(),
+        frames: data.frames().len(),
+        detected: data
+            .probes
+            .iter()
+            .map(|p| (p.name.clone(), p.rows.iter().filter(|r| r.detected).count()))
+            .collect(),
         thumbnails: thumbs.len(),
         notes,
     })
@@ -146,14 +193,31 @@ pub fn force_unit(max_abs_nn: f64) -> (f64, &'static str) {
     }
 }
 
-type Plot = (&'static str, &'static str, String, RgbImage);
+/// A plot: its file, title, caption and picture.
+type Plot = (String, &'static str, String, RgbImage);
 
-/// The three plots (file, title, caption, picture); a note for what cannot be drawn.
-fn plots(data: &SessionData, notes: &mut Vec<String>) -> Vec<Plot> {
+/// The plots of probe `k`: force and angle, detection and confidence. Their files are
+/// named as its results ([`per_probe`]); with several probes their panels name it.
+fn probe_plots(data: &SessionData, k: usize) -> Vec<Plot> {
+    let probe: &ProbeData = &data.probes[k];
+    let names: Vec<&str> = data.probes.iter().map(|p| p.name.as_str()).collect();
+    let file = |plain: &str| {
+        per_probe(Path::new(plain), &names)[k]
+            .1
+            .display()
+            .to_string()
+    };
+    let titled = |title: &str| {
+        if data.several() {
+            format!("{title} ({})", probe.name)
+        } else {
+            title.to_string()
+        }
+    };
     let x_label = if data.timed { "time (s)" } else { "frame" };
     let series = |label: &str, colour, style, f: &dyn Fn(&FrameRow) -> Option<f64>| Series {
         label: label.into(),
-        points: data
+        points: probe
             .rows
             .iter()
             .map(|r| [r.t, f(r).unwrap_or(f64::NAN)])
@@ -161,13 +225,13 @@ fn plots(data: &SessionData, notes: &mut Vec<String>) -> Vec<Plot> {
         colour,
         style,
     };
-    let peak = data
+    let peak = probe
         .rows
         .iter()
         .flat_map(|r| [r.force_nn, r.true_force_nn])
         .flatten()
         .fold(0.0f64, |m, f| m.max(f.abs()));
-    let (k, unit) = force_unit(peak);
+    let (scale, unit) = force_unit(peak);
     let with_truth = |measured: Series, truth: Series| {
         let has_truth = truth.points.iter().any(|p| p[1].is_finite());
         if has_truth {
@@ -177,20 +241,20 @@ fn plots(data: &SessionData, notes: &mut Vec<String>) -> Vec<Plot> {
         }
     };
     let force = Panel {
-        title: "Force".into(),
+        title: titled("Force"),
         y_label: unit.into(),
         series: with_truth(
             series("tracked", BLUE, Style::LineDots, &|r| {
-                r.force_nn.map(|f| f * k)
+                r.force_nn.map(|f| f * scale)
             }),
             series("truth", ORANGE, Style::Line, &|r| {
-                r.true_force_nn.map(|f| f * k)
+                r.true_force_nn.map(|f| f * scale)
             }),
         ),
         y_range: None,
     };
     let angle = Panel {
-        title: "Tip angle".into(),
+        title: titled("Tip angle"),
         y_label: "degrees, CCW on screen".into(),
         series: with_truth(
             series("tracked", BLUE, Style::LineDots, &|r| r.angle_deg),
@@ -199,7 +263,7 @@ fn plots(data: &SessionData, notes: &mut Vec<String>) -> Vec<Plot> {
         y_range: None,
     };
     let detection = Panel {
-        title: "Detection and confidence".into(),
+        title: titled("Detection and confidence"),
         y_label: "0..1".into(),
         series: vec![
             series("confidence", BLUE, Style::Line, &|r| r.confidence),
@@ -212,41 +276,53 @@ fn plots(data: &SessionData, notes: &mut Vec<String>) -> Vec<Plot> {
         ],
         y_range: Some([-0.08, 1.08]),
     };
-    let mut out: Vec<Plot> = vec![
+    vec![
         (
-            "force_angle.png",
+            file("force_angle.png"),
             "Force and tip angle",
             "Tracked values of every frame; gaps are frames without a detection.".into(),
             plot::panels(&[force, angle], x_label, WIDTH, 300),
         ),
         (
-            "detection.png",
+            file("detection.png"),
             "Detection and confidence",
             "Tracker confidence per frame; dots at 1 are detections, at 0 misses.".into(),
             plot::panels(&[detection], x_label, WIDTH, 260),
         ),
-    ];
-    let times: Vec<f64> = data.rows.iter().filter_map(|r| r.processing_ms).collect();
+    ]
+}
+
+/// The histogram of processing times, one per frame (the first probe's rows: the
+/// probes of a frame share its time); a note when the session has none.
+fn latency_plot(data: &SessionData, notes: &mut Vec<String>) -> Option<Plot> {
+    let times: Vec<f64> = data
+        .frames()
+        .iter()
+        .filter_map(|r| r.processing_ms)
+        .collect();
     if times.is_empty() {
         notes
             .push("No processing times in this session (replay with --timing to get them).".into());
-    } else {
-        out.push((
-            "latency.png",
-            "Processing time",
-            format!("Tracker processing time of {} frames.", times.len()),
-            plot::histogram(&times, 40, "Processing time per frame", "ms", WIDTH, 300),
-        ));
+        return None;
     }
-    out
+    Some((
+        "latency.png".into(),
+        "Processing time",
+        format!("Tracker processing time of {} frames.", times.len()),
+        plot::histogram(&times, 40, "Processing time per frame", "ms", WIDTH, 300),
+    ))
 }
 
 fn subtitle(data: &SessionData) -> String {
     match &data.kind {
-        Kind::Replayed { csv, .. } => format!(
+        Kind::Replayed { .. } => format!(
             "Replayed session {} (results {})",
             data.dir.display(),
-            csv.display()
+            data.probes
+                .iter()
+                .map(|p| p.csv.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
         Kind::Recorded => format!("Recorded by nanoforce run: {}", data.dir.display()),
     }

@@ -1,6 +1,7 @@
 //! The report's strip of overlay thumbnails: frames spread evenly over the session, each
 //! with its found edges in red, blue and green and the apex marked (the paper's Figure 8,
-//! [`crate::vision::draw_overlay`]).
+//! [`crate::vision::draw_overlay`]). Of a session of several probes every probe is drawn
+//! on each thumbnail, and its caption has a line per probe.
 //!
 //! A replayed session draws them from its frames and the edge columns of the replay CSV
 //! (nothing is tracked again). A recorded session shows the thumbnails the daemon drew
@@ -30,7 +31,8 @@ const LINE_PX: u32 = 16;
 #[derive(Debug, Clone)]
 pub struct Thumbnail {
     pub image: RgbImage,
-    /// Its lines.
+    /// Its lines: the frame and its tracked values (a lone probe), or the frame and a
+    /// line per probe.
     pub caption: Vec<String>,
 }
 
@@ -62,18 +64,34 @@ fn from_frames(
     let mut out = Vec::new();
     let mut missing = 0;
     let mut outside = Vec::new();
-    for k in spread(data.rows.len(), max) {
-        let row = &data.rows[k];
+    let frames = data.frames();
+    for k in spread(frames.len(), max) {
+        let row = &frames[k];
         // Skipped, not followed; the note is printed as a warning by `nanoforce report`.
         let Some(path) = frame_path(frames_dir, &row.name) else {
             outside.push(format!("{:?}", row.name));
             continue;
         };
+        // Each probe's row of the frame: the k-th of its file, else the one of its name.
+        let rows: Vec<Option<&FrameRow>> = data
+            .probes
+            .iter()
+            .map(|p| {
+                p.rows
+                    .get(k)
+                    .filter(|r| r.name == row.name)
+                    .or_else(|| p.rows.iter().find(|r| r.name == row.name))
+            })
+            .collect();
         match load_gray(&path) {
-            Ok(frame) => out.push(Thumbnail {
-                image: overlay_thumbnail(&frame, &estimate_of(row)),
-                caption: vec![caption(row, data.timed)],
-            }),
+            Ok(frame) => {
+                let estimates: Vec<Estimate> =
+                    rows.iter().flatten().map(|r| estimate_of(r)).collect();
+                out.push(Thumbnail {
+                    image: overlay_at_width(&frame, &estimates, THUMB_WIDTH),
+                    caption: caption(data, row, &rows, data.timed),
+                });
+            }
             Err(_) => missing += 1,
         }
     }
@@ -155,25 +173,24 @@ fn from_recording(data: &SessionData, max: usize) -> (Vec<Thumbnail>, Option<Str
             .file_stem()
             .and_then(|s| s.to_str())
             .and_then(|s| s.trim_start_matches("frame_").parse::<u64>().ok());
-        let row = data
-            .rows
+        let rows: Vec<Option<&FrameRow>> = data
+            .probes
             .iter()
-            .find(|r| seq.is_some() && r.frame_seq == seq);
-        let caption = row.map_or_else(
-            || format!("frame {}", seq.map_or("?".into(), |s| s.to_string())),
-            |r| caption(r, true),
-        );
+            .map(|p| p.rows.iter().find(|r| seq.is_some() && r.frame_seq == seq))
+            .collect();
+        let caption = match rows.iter().flatten().next() {
+            Some(row) => caption(data, row, &rows, true),
+            None => vec![format!(
+                "frame {}",
+                seq.map_or("?".into(), |s| s.to_string())
+            )],
+        };
         out.push(Thumbnail {
             image: shrink(&image.into_rgb8()),
-            caption: vec![caption],
+            caption,
         });
     }
     (out, None)
-}
-
-/// The frame shrunk to [`THUMB_WIDTH`] with the estimate drawn on the small picture.
-pub fn overlay_thumbnail(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
-    overlay_at_width(frame, std::slice::from_ref(estimate), THUMB_WIDTH)
 }
 
 /// The frame shrunk to `width` (never enlarged) with every probe's estimate drawn on
@@ -210,18 +227,42 @@ fn shrink(image: &RgbImage) -> RgbImage {
     imageops::resize(image, THUMB_WIDTH, h.max(1), FilterType::Triangle)
 }
 
-fn caption(row: &FrameRow, timed: bool) -> String {
+/// The caption of the frame of `row`: one line with its time and tracked values for a
+/// lone probe; with several, the frame and its time, then each probe's values (`rows`,
+/// in the probes' order) on a line of its own.
+fn caption(
+    data: &SessionData,
+    row: &FrameRow,
+    rows: &[Option<&FrameRow>],
+    timed: bool,
+) -> Vec<String> {
     let when = if timed {
         format!("{:.2} s", row.t)
     } else {
         format!("#{}", row.t as u64)
     };
+    if !data.several() {
+        return vec![format!("{}  {when}  {}", row.name, values(row))];
+    }
+    let mut lines = vec![format!("{}  {when}", row.name)];
+    for (probe, row) in data.probes.iter().zip(rows) {
+        lines.push(format!(
+            "{}  {}",
+            probe.name,
+            row.map_or_else(|| "no row".into(), values)
+        ));
+    }
+    lines
+}
+
+/// A row's angle and force, or that it was not detected.
+fn values(row: &FrameRow) -> String {
     match (row.detected, row.angle_deg, row.force_nn) {
         (true, Some(a), Some(f)) => {
             let (scale, unit) = force_unit(f.abs());
-            format!("{}  {when}  {a:+.2}°  {:+.1} {unit}", row.name, f * scale)
+            format!("{a:+.2}°  {:+.1} {unit}", f * scale)
         }
-        _ => format!("{}  {when}  not detected", row.name),
+        _ => "not detected".into(),
     }
 }
 
