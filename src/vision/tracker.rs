@@ -87,6 +87,20 @@ fn complete(hyp: &Hypothesis) -> bool {
     found >= 2 && hyp.score > 0.0
 }
 
+/// Share of a hypothesis' predicted edge segments covered by edge pixels (the
+/// evidence's `coverage`).
+fn coverage(hyp: &Hypothesis) -> f64 {
+    let (sup, vis) = hyp
+        .coverage
+        .iter()
+        .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
+    if vis > 0.0 {
+        sup / vis
+    } else {
+        0.0
+    }
+}
+
 /// Whether two placements are the same tip.
 fn same_place(a: &Pose, b: &Pose) -> bool {
     norm(sub(a.apex, b.apex)) <= SAME_APEX_PX && wrap_pi(a.psi - b.psi).abs() <= SAME_PSI_RAD
@@ -372,6 +386,12 @@ impl Tracker {
             }
             tried[n] = h.pose;
             n += 1;
+            // Its confidence is at most its coverage's score: one that cannot outrank
+            // even at that is not refined.
+            let bar = best.confidence.max(first.confidence + RIVAL_MARGIN);
+            if verify::coverage_score(coverage(&h)) <= bar {
+                continue;
+            }
             let alt = self.evaluate(frame, t, &h);
             if outranks(&alt, &best, first.confidence) {
                 best = alt;
@@ -496,16 +516,12 @@ impl Tracker {
         }
         let in_view = bands.map(|b| b.is_some());
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
-        let (sup, vis) = hyp
-            .coverage
-            .iter()
-            .fold((0.0, 0.0), |(s, v), c| (s + c.supported, v + c.visible));
         let margin = half_width(fit.blur);
         let interior = verify::interior_median(frame, t, pose, margin).map_or(0.0, |m| {
             verify::interior_position(fit, m, self.calibration.pyramid_polarity())
         });
         let evidence = Evidence {
-            coverage: if vis > 0.0 { sup / vis } else { 0.0 },
+            coverage: coverage(hyp),
             contrast_ratio: verify::contrast_ratio(fit, &in_view, &calibrated),
             interior,
             turn_sigma_deg: fit.turn_sigma.to_degrees(),

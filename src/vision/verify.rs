@@ -50,15 +50,26 @@ pub struct Evidence {
 }
 
 impl Evidence {
-    /// The combined confidence in [0, 1].
+    /// The combined confidence in [0, 1]: at most [`coverage_score`] of `coverage`,
+    /// which it multiplies by other scores in [0, 1].
     pub fn confidence(&self) -> f64 {
-        let ramp = |x: f64, lo: f64, hi: f64| ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
-        let coverage = ramp(self.coverage, 0.3, FULL_COVERAGE);
+        let coverage = coverage_score(self.coverage);
         let contrast = ramp(self.contrast_ratio, MIN_CONTRAST_RATIO, 0.45);
         let interior = ramp(self.interior, 0.4, 0.75);
         let precision = (-self.turn_sigma_deg / 0.3).exp();
         coverage * contrast * interior * precision
     }
+}
+
+/// Linear from 0 at `lo` to 1 at `hi`, clamped to [0, 1].
+fn ramp(x: f64, lo: f64, hi: f64) -> f64 {
+    ((x - lo) / (hi - lo)).clamp(0.0, 1.0)
+}
+
+/// The coverage's score in [0, 1], the first factor of [`Evidence::confidence`]: a
+/// bound on the confidence known before the grey-level fit.
+pub fn coverage_score(coverage: f64) -> f64 {
+    ramp(coverage, 0.3, FULL_COVERAGE)
 }
 
 /// The fitted contrast of each edge in view relative to its calibrated contrast; the
@@ -167,6 +178,25 @@ pub fn interior_position(fit: &FitResult, median: f64, polarity: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn confidence_is_at_most_the_coverage_score() {
+        for coverage in [0.0, 0.31, 0.42, 0.5, 0.54, 0.55, 0.9] {
+            for contrast_ratio in [0.1, 0.3, 0.45, 2.0] {
+                for interior in [0.0, 0.6, 0.75, 1.5] {
+                    for turn_sigma_deg in [0.0, 0.01, 1.0] {
+                        let e = Evidence {
+                            coverage,
+                            contrast_ratio,
+                            interior,
+                            turn_sigma_deg,
+                        };
+                        assert!(e.confidence() <= coverage_score(coverage), "{e:?}");
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn confidence_needs_every_kind_of_evidence() {
