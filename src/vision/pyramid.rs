@@ -233,6 +233,25 @@ dispatch! {
 /// Largest binning factor whose column sums fit the `u16` columns (255 x 257 < 2^16).
 const MAX_COLUMN_FACTOR: usize = 257;
 
+/// Bits of the fixed-point reciprocal that divides a bin's sum by `factor^2` for the
+/// histogram: the sum `s` of d = `factor^2` 8-bit levels times `ceil(2^48 / d)`, shifted
+/// down by 48, is `s / d` plus less than `255 d / 2^48`, under the `1 / d` that would
+/// carry it to the next integer while `255 d^2 < 2^48` (a division costs a dozen
+/// multiplications).
+const RECIPROCAL_BITS: u32 = 48;
+/// Largest binning factor the reciprocal divides exactly (see [`RECIPROCAL_BITS`]).
+const MAX_RECIPROCAL_FACTOR: usize = 1023;
+
+/// The sums of each run of `K` consecutive `columns` into `sums` (a fixed run length
+/// unrolls).
+#[inline(always)]
+fn column_runs<const K: usize>(sums: &mut [u32], columns: &[u16]) {
+    for (s, c) in sums.iter_mut().zip(columns.chunks_exact(K)) {
+        let run: &[u16; K] = c.try_into().expect("chunks of K");
+        *s = run.iter().map(|&v| v as u32).sum::<u32>();
+    }
+}
+
 /// Mean of each `factor x factor` block of `frame` into `out` (row-major, `width` wide).
 /// Also fills `hist` with the histogram of the binned grey levels (for Otsu).
 #[inline(always)]
@@ -247,6 +266,8 @@ fn bin_body(
     let mut partial = [[0u32; 256]; 4];
     let shift = (factor * factor).trailing_zeros();
     let power_of_two = (factor * factor).is_power_of_two();
+    let reciprocal = factor <= MAX_RECIPROCAL_FACTOR;
+    let inverse = (1u64 << RECIPROCAL_BITS).div_ceil((factor * factor) as u64);
     let stride = frame.width() as usize;
     let raw: &[u8] = frame.as_raw();
     let inv = 1.0 / (factor * factor) as f32;
@@ -278,8 +299,15 @@ fn bin_body(
                     *c += v as u16;
                 }
             }
-            for (s, c) in sums.iter_mut().zip(columns.chunks_exact(factor)) {
-                *s = c.iter().map(|&v| v as u32).sum::<u32>();
+            // The factors of 1024- and 1280-wide frames, unrolled.
+            match factor {
+                3 => column_runs::<3>(sums, columns),
+                4 => column_runs::<4>(sums, columns),
+                _ => {
+                    for (s, c) in sums.iter_mut().zip(columns.chunks_exact(factor)) {
+                        *s = c.iter().map(|&v| v as u32).sum::<u32>();
+                    }
+                }
             }
         } else {
             sums.iter_mut().for_each(|s| *s = 0);
@@ -301,6 +329,8 @@ fn bin_body(
         let level = |s: u32| {
             let level = if power_of_two {
                 s >> shift
+            } else if reciprocal {
+                ((s as u64 * inverse) >> RECIPROCAL_BITS) as u32
             } else {
                 s / (factor * factor) as u32
             };
@@ -377,6 +407,32 @@ mod tests {
         // Detection pixel 100 covers frame pixels 200 and 201: centre 200.5.
         assert_eq!(p.to_frame([100.0, 0.0])[0], 200.5);
         assert_eq!(p.frame_to_detection([200.5, 0.5]), [100.0, 0.0]);
+    }
+
+    #[test]
+    fn binning_gives_each_block_mean_and_its_histogram() {
+        let frame = GrayImage::from_fn(200, 150, |x, y| {
+            image::Luma([((x * 37 + y * 101 + x * y) % 256) as u8])
+        });
+        let mut p = Pyramid::default();
+        for factor in 1..=7u32 {
+            p.build_binned(&frame, factor);
+            let mut hist = [0u32; 256];
+            for by in 0..p.height as u32 {
+                for bx in 0..p.width as u32 {
+                    let mut sum = 0;
+                    for dy in 0..factor {
+                        for dx in 0..factor {
+                            sum += frame.get_pixel(bx * factor + dx, by * factor + dy)[0] as u32;
+                        }
+                    }
+                    let i = by as usize * p.width + bx as usize;
+                    assert_eq!(p.grey[i], sum as f32 * (1.0 / (factor * factor) as f32));
+                    hist[(sum / (factor * factor)) as usize] += 1;
+                }
+            }
+            assert_eq!(p.histogram, hist, "factor {factor}");
+        }
     }
 
     #[test]
