@@ -615,10 +615,6 @@ window_deg = 10
         .unwrap();
         assert_eq!(cfg.probes[0].pressing_force_sign, Some(-1.0));
         assert!(!cfg.probes[0].felt);
-        // A probe's gains: [teleop] with its cantilever and sign.
-        let gains = cfg.probes[0].gains(&cfg.teleop);
-        assert_eq!(gains.pressing_force_sign, -1.0);
-        assert_eq!(gains.cantilever, cfg.probes[0].cantilever.unwrap());
     }
 
     #[test]

@@ -8,7 +8,6 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::checks::{Checker, ConfigError, Range};
-use crate::control::TeleopGains;
 use crate::hw::config::RawDevice;
 use crate::model::Cantilever;
 use crate::sim::config::{RawSimProbe, SimProbe};
@@ -65,18 +64,6 @@ impl ProbeConfig {
     /// `probe[1].tracker.calibration` for entry 1), as messages give it.
     pub fn key(&self, key: &str) -> String {
         format!("{}{key}", self.prefix)
-    }
-
-    /// The teleoperation gains while the stylus feels this probe: `[teleop]` and
-    /// `[safety]` with its cantilever and pressing sign.
-    pub fn gains(&self, teleop: &TeleopGains) -> TeleopGains {
-        TeleopGains {
-            cantilever: self.cantilever.unwrap_or(teleop.cantilever),
-            pressing_force_sign: self
-                .pressing_force_sign
-                .unwrap_or(teleop.pressing_force_sign),
-            ..teleop.clone()
-        }
     }
 }
 

@@ -512,3 +512,28 @@ impl GateLog {
         self.last_line = Some(now);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_felt_probe_brings_its_cantilever_and_sign_into_the_gains() {
+        let teleop = TeleopGains::default();
+        let beam = Cantilever {
+            length_um: 200.0,
+            ..teleop.cantilever
+        };
+        let own = FeltProbe {
+            probe: 1,
+            cantilever: Some(beam),
+            pressing_force_sign: Some(-1.0),
+        };
+        let gains = own.gains(teleop.clone());
+        assert_eq!(gains.pressing_force_sign, -1.0);
+        assert_eq!(gains.cantilever, beam);
+        assert_eq!(gains.press_direction_stage, teleop.press_direction_stage);
+        // A lone probe is felt with [teleop] as it is.
+        assert_eq!(FeltProbe::SINGLE.gains(teleop.clone()), teleop);
+    }
+}
