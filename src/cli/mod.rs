@@ -47,6 +47,19 @@ pub enum Command {
 }
 
 /// Runs one subcommand; the exit code says whether it succeeded.
+/// Each probe's detections as replay and report print them: `12 detected` for a lone
+/// probe, `left 12 detected, right 11 detected` for several.
+fn detected_line<N: std::fmt::Display>(detected: &[(N, usize)]) -> String {
+    match detected {
+        [(_, n)] => format!("{n} detected"),
+        several => several
+            .iter()
+            .map(|(name, n)| format!("{name} {n} detected"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     logging::init();
     match cli.command {

@@ -133,14 +133,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         Some(info) => replay_session(&args, info, &inputs, &probes)?,
         None => replay(&args, &inputs, &probes)?,
     };
-    let detected = match summary.detected.as_slice() {
-        [(_, n)] => format!("{n} detected"),
-        several => several
-            .iter()
-            .map(|(name, n)| format!("{name} {n} detected"))
-            .collect::<Vec<_>>()
-            .join(", "),
-    };
+    let detected = super::detected_line(&summary.detected);
     eprintln!(
         "replayed {} frames: {detected}, {} unreadable, {} with an SEM pixel size{}; median {} ms per frame (tracking)",
         summary.frames,

@@ -60,14 +60,7 @@ pub fn run(args: ReportArgs) -> anyhow::Result<ExitCode> {
     for note in &output.notes {
         tracing::warn!("{note}");
     }
-    let detected = match output.detected.as_slice() {
-        [(_, n)] => format!("{n} detected"),
-        several => several
-            .iter()
-            .map(|(name, n)| format!("{name} {n} detected"))
-            .collect::<Vec<_>>()
-            .join(", "),
-    };
+    let detected = super::detected_line(&output.detected);
     eprintln!(
         "report of {} frames ({detected}, {} thumbnails): {}",
         output.frames,

@@ -109,10 +109,11 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
             .join(" + "),
         haptic.name()
     );
+    let names: Vec<String> = config.probes.iter().map(|p| p.name.clone()).collect();
     if config.probes.len() > 1 {
         tracing::info!(
             "probes: {}; the stylus feels {} (its second button switches)",
-            names(config).join(", "),
+            names.join(", "),
             felt.iter()
                 .map(|f| config.probes[f.probe].name.as_str())
                 .collect::<Vec<_>>()
@@ -124,13 +125,9 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
         estimator: Box::new(VisionEstimator(trackers)),
         stages,
         haptic,
-        names: names(config),
+        names,
         felt,
     })
-}
-
-fn names(config: &Config) -> Vec<String> {
-    config.probes.iter().map(|p| p.name.clone()).collect()
 }
 
 /// The probes the stylus can feel, in the configuration's order: at least one, or the
