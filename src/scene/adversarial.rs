@@ -123,13 +123,21 @@ impl Adversary {
         let mut spec = random_frame(&setup, style, mag, angle, &mut rng);
         spec.blank = false;
         let mut shapes = Rng::new(sub_seed(seed, STREAM_SHAPES));
+        // The probe this frame draws: the session's, or for another probe, its
+        // geometry changed.
+        let drawn = match decoy {
+            Decoy::OtherProbe => other_geometry(&spec.probe, &mut shapes),
+            _ => spec.probe,
+        };
         if matches!(decoy, Decoy::Mirrored | Decoy::OtherProbe) {
             // Only the whole tip tells these from the probe: the wedge alone, mirrored, is
             // the probe's wedge turned, and another beam is out of view. The magnification
-            // and placement are drawn again until the beam's free end and the pyramid's
-            // base are in the frame.
+            // and placement are drawn again until the drawn probe's beam free end (both
+            // faces of the beam) and its pyramid's base are in the frame.
             for _ in 0..MAX_REDRAWS {
-                if shows_whole_tip(&spec, &mut self.polygon) {
+                let mut shown = spec;
+                shown.probe = drawn;
+                if shows_whole_tip(&shown, &mut self.polygon) {
                     break;
                 }
                 let mag = rng.log_uniform(1000.0, 8000.0).round();
@@ -149,8 +157,9 @@ impl Adversary {
                 image::imageops::flip_horizontal_in_place(frame);
             }
             Decoy::OtherProbe => {
-                spec.probe = other_geometry(&spec.probe, &mut shapes);
-                self.renderer.render_into(&spec, frame);
+                let mut other = spec;
+                other.probe = drawn;
+                self.renderer.render_into(&other, frame);
             }
             Decoy::Shapes => {
                 spec.blank = true;
