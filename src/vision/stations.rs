@@ -465,6 +465,9 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red));
     }
+    if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, fitted) {
+        return Some(miss);
+    }
     if let Some(miss) =
         beam_edge.and_then(|red| lower_face(frame, t, pose, &red, &s, calibrated[RED]))
     {
@@ -654,6 +657,81 @@ fn turned_face(
     let turned = Line::through(a1, normal);
     let q = profile(frame, &turned, (a1, b1), partner, s, predicted.step);
     q.stations == STATIONS && shown(&q) >= before + TURNED_GAIN
+}
+
+/// Stations over a face's end, as a share of its predicted length either side of
+/// its base.
+const END_SPAN: f64 = 0.3;
+/// A station over a face's end shows the face from this share of its calibrated step.
+const END_RATIO: f64 = 0.5;
+/// Stations over a face's end that may go against the measured end.
+const END_AGAINST: usize = 1;
+/// How far, as a share of its length, a face may end from its predicted base: the
+/// stations over its end are that far apart, and a face's end is blurred.
+const END_SLACK: f64 = 0.1;
+
+/// Where face `e`'s step ends along its predicted line, as a share of its predicted
+/// length (1 at the predicted base); `None` when its stations are not all in view.
+fn face_end(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    s: &Sampling,
+    step: f64,
+) -> Option<f64> {
+    let (tip, base) = t.segment(pose, e);
+    let line = t.line(pose, e);
+    let d = sub(base, tip);
+    let at = |f: f64| add(tip, scale(d, f));
+    let p = profile(
+        frame,
+        &line,
+        (at(1.0 - END_SPAN), at(1.0 + END_SPAN)),
+        None,
+        s,
+        step,
+    );
+    if p.stations < STATIONS {
+        return None;
+    }
+    let shows = |k: usize| p.ratio[k] >= END_RATIO;
+    // The splits that best explain the stations: showing the face before, not after.
+    let score = |j: usize| {
+        (0..j).filter(|&k| shows(k)).count() + (j..STATIONS).filter(|&k| !shows(k)).count()
+    };
+    let best = (0..=STATIONS).map(score).max()?;
+    let first = (0..=STATIONS).find(|&j| score(j) == best)?;
+    let last = (0..=STATIONS).rev().find(|&j| score(j) == best)?;
+    // A face that shows on every station or on none, or with more than one station
+    // against the split, gives no measure of its end.
+    if best + END_AGAINST < STATIONS || first == 0 || last == STATIONS {
+        return None;
+    }
+    let j = 0.5 * (first + last) as f64;
+    Some(1.0 - END_SPAN + 2.0 * END_SPAN * j / STATIONS as f64)
+}
+
+/// Both faces, where their fits place them and their ends are measured, ending more
+/// than [`END_SLACK`] of their length before or beyond the bases the scale predicts:
+/// the pyramid is not this probe's size at this scale. The scale comes from the beam
+/// edge's distance to the apex, so a beam of another thickness moves it while the
+/// pyramid keeps its size. One face alone can end early or late where a particle or
+/// a bright substrate lies at its base; the scale moves both.
+fn face_ends(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    s: &Sampling,
+    calibrated: &[f64; 3],
+    fitted: [bool; 3],
+) -> Option<Miss> {
+    if !(fitted[BLUE] && fitted[GREEN]) {
+        return None;
+    }
+    let end = |e: usize| face_end(frame, t, pose, e, s, calibrated[e]).map(|f| f - 1.0);
+    let (b, g) = (end(BLUE)?, end(GREEN)?);
+    (b * g > 0.0 && b.abs().min(g.abs()) > END_SLACK).then_some(Miss::ScaleMismatch)
 }
 
 /// How far behind the back face's base the lower face is checked, in tip heights:
