@@ -109,7 +109,7 @@ fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
 const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
     ("mirrored", 2),
-    ("occluded", 2),
+    ("occluded", 1),
     ("other-probe", 4),
     ("real-sem", 0),
     ("shapes", 1),

@@ -144,10 +144,20 @@ impl Profile {
         (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs()
     }
 
-    /// Whether the stations at the corner end show the edge: all but one of
-    /// [`END_STATIONS`].
+    /// Whether the stations at the corner end show the edge, with the probe on its
+    /// side of it (its inside within [`INSIDE_SPREAD`] of the calibrated step of the
+    /// probe's level along the rest of the edge): all but one of [`END_STATIONS`]. A
+    /// patch darker than the surroundings over the tip steps the same way, from its
+    /// own level.
     pub fn corner_held(&self) -> bool {
-        self.held_in(0..END_STATIONS) + 1 >= END_STATIONS
+        let probe_level = self.held_level();
+        let shown = (0..END_STATIONS)
+            .filter(|&k| {
+                self.held(k)
+                    && (self.inside[k] - probe_level).abs() <= INSIDE_SPREAD * self.step.abs()
+            })
+            .count();
+        shown + 1 >= END_STATIONS
     }
 
     /// Whether the probe is there at the corner end even where the edge does not
@@ -822,6 +832,33 @@ mod tests {
         let a = [centre[0] - 40.0 * dir[0], centre[1] - 40.0 * dir[1]];
         let b = [centre[0] + 40.0 * dir[0], centre[1] + 40.0 * dir[1]];
         (Line::through(centre, [c, s]), (a, b))
+    }
+
+    /// A face's profile: every station shows the step from the probe's level, except
+    /// the corner stations, which step from `corner_inside` with `corner_ratio`.
+    fn face_profile(corner_inside: f64, corner_ratio: f64) -> Profile {
+        let mut p = Profile {
+            stations: STATIONS,
+            ratio: [1.0; STATIONS],
+            inside: [210.0; STATIONS],
+            step: 130.0,
+            corner_in_view: true,
+        };
+        for k in 0..END_STATIONS - 1 {
+            p.inside[k] = corner_inside;
+            p.ratio[k] = corner_ratio;
+        }
+        p
+    }
+
+    #[test]
+    fn a_corner_shows_its_face_only_from_the_probes_level() {
+        // The probe's own corner, its step fading into the blur at the apex.
+        assert!(face_profile(195.0, 0.3).corner_held());
+        // A patch darker than the surroundings over the tip: its border steps the
+        // face's way, from the patch's level.
+        assert!(!face_profile(77.0, 0.3).corner_held());
+        assert!(!face_profile(77.0, 0.3).corner_inside_probe());
     }
 
     #[test]
