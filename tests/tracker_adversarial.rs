@@ -110,7 +110,7 @@ const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
     ("mirrored", 2),
     ("occluded", 1),
-    ("other-probe", 4),
+    ("other-probe", 3),
     ("real-sem", 0),
     ("shapes", 1),
 ];

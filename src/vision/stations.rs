@@ -117,10 +117,6 @@ impl Profile {
         self.ratio[k] >= HOLD_RATIO
     }
 
-    fn held_in(&self, range: std::ops::Range<usize>) -> usize {
-        range.filter(|&k| self.held(k)).count()
-    }
-
     /// Median step over the calibrated one.
     pub fn step_ratio(&self) -> f64 {
         median(&self.ratio, self.stations.max(1))
@@ -389,8 +385,8 @@ pub fn check_edges(
     // The beam edge where the frame shows it: the fitted line, or the one found
     // within the slack when the fit left it out.
     let mut beam_edge = fitted[RED].then_some(red);
-    // The faces left out of the fit whose corner is in view, for the turned-face check.
-    let mut unfitted_faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
+    // The faces whose corner is in view, for the turned-face check.
+    let mut faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -453,8 +449,8 @@ pub fn check_edges(
         if let Some(miss) = p.refusal(Edge::ALL[e]) {
             return Some(miss);
         }
-        if e != RED && corner && !fitted[e] {
-            unfitted_faces[e] = Some(((a, b), p, partner));
+        if e != RED && corner {
+            faces[e] = Some(((a, b), p, partner));
         }
         if e != RED && corner {
             let held = p.corner_held();
@@ -484,7 +480,7 @@ pub fn check_edges(
         return Some(miss);
     }
     // Last, as the dearest: a face the frame shows turned from its prediction.
-    for (e, face) in unfitted_faces.iter().enumerate() {
+    for (e, face) in faces.iter().enumerate() {
         if let Some((span, p, partner)) = face {
             if turned_face(frame, &t.line(pose, e), *span, partner.as_ref(), &s, p) {
                 return Some(Miss::EdgeMissing(Edge::ALL[e]));
@@ -593,8 +589,10 @@ fn shown(p: &Profile) -> f64 {
 /// the located steps are that face when at least [`HELD_SHARE`] of the stations
 /// locate one, they lie on one line within [`FACE_LINE_PX`], that line is turned, and
 /// it shows [`TURNED_GAIN`] stations' worth more of the step than the predicted one.
-/// Looked at for a face the fit left out (a face the fit placed is where its own grey
-/// levels put it) and only when the predicted face leaves room for that gain.
+/// Looked at for every face whose corner is in view, fitted or not: the fit turns
+/// the faces together, so a face of another angle is placed where it crosses its
+/// partner's prediction. Only when the predicted face leaves room for that gain,
+/// which a face shown along its length does not.
 fn turned_face(
     frame: &GrayImage,
     line: &Line,
