@@ -12,9 +12,12 @@
 //!    through the crossings.
 //! 3. Along the pyramid's axis the probe ends at the beam's upper face (red). Its
 //!    direction is the one along which the step is strongest; it is traced both ways.
-//! 4. The beam runs much further one way (to the clamp, usually out of the frame) than
-//!    the other (the free end): the face on the clamp's side is the back face (blue),
-//!    the other the front face (green).
+//! 4. The front face is the steeper one: where the two faces' lines meet the beam's,
+//!    its base lies nearer the apex's foot, so the other is the back face (blue,
+//!    towards the clamp) and the front face green, as the calibration reads them. Only
+//!    when the two bases lie about as far from the foot does the beam decide: it runs
+//!    much further towards the clamp (usually out of the frame) than to the free end.
+//!    A beam edge that the faces run past is not the beam's upper face, and refused.
 //!
 //! Without a click, the apex is the point of the largest body touching a frame side
 //! (grey levels above Otsu's level, or above the level splitting the bright class, the
@@ -24,6 +27,7 @@ use std::collections::VecDeque;
 
 use image::GrayImage;
 
+use super::calibration::SYMMETRIC_BASES;
 use super::geometry::{add, dot, norm, principal_axis, scale, sub, unit, Line};
 use super::options::{CalibrationConfig, TrackerConfig};
 use super::{Calibration, VisionError};
@@ -378,9 +382,16 @@ pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, A
         traced(&pts, f.dir).unwrap_or(f)
     });
     let (red, exit) = red_edge(img, apex, axis, &faces, w.polarity)?;
-    // The beam runs further from the pyramid towards the clamp than to the free end.
-    let t_exit = dot(sub(exit, red.point), red.dir);
-    let (clamp, free_t, clamp_t) = if red.span.1 - t_exit >= t_exit - red.span.0 {
+    let clamp_along_red = match back_face_side(&red, apex, &faces) {
+        Some(side) => side > 0.0,
+        // Faces as steep as each other: the beam runs further from the pyramid towards
+        // the clamp than to the free end.
+        None => {
+            let t_exit = dot(sub(exit, red.point), red.dir);
+            red.span.1 - t_exit >= t_exit - red.span.0
+        }
+    };
+    let (clamp, free_t, clamp_t) = if clamp_along_red {
         (red.dir, red.span.0, red.span.1)
     } else {
         (scale(red.dir, -1.0), -red.span.1, -red.span.0)
@@ -403,6 +414,25 @@ pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, A
         blue: blue.clicks(&shares),
         green: green.clicks(&shares),
     })
+}
+
+/// Which way along `red.dir` the back face's base lies (+1 or -1), from where the two
+/// faces' lines meet the beam's: the front face is the steeper one, so its base lies
+/// nearer the apex's foot, on the free end's side (the calibration's rule, which does
+/// not depend on how far the faces were traced). `None` when the two bases lie about
+/// as far from the foot (within [`SYMMETRIC_BASES`]) or a face does not meet the beam.
+fn back_face_side(red: &Traced, apex: [f64; 2], faces: &[Traced; 2]) -> Option<f64> {
+    let line = |t: &Traced| Line::through(t.point, [-t.dir[1], t.dir[0]]);
+    let beam = line(red);
+    let foot = dot(sub(apex, red.point), red.dir);
+    let base = |f: &Traced| Some(dot(sub(beam.intersect(&line(f))?, red.point), red.dir) - foot);
+    let bases = [base(&faces[0])?, base(&faces[1])?];
+    let (near, far) = if bases[0].abs() <= bases[1].abs() {
+        (bases[0], bases[1])
+    } else {
+        (bases[1], bases[0])
+    };
+    (far.abs() - near.abs() >= SYMMETRIC_BASES * far.abs()).then_some(far.signum())
 }
 
 /// The beam's upper face: where the probe ends along the pyramid's axis, its direction
@@ -483,6 +513,19 @@ fn red_edge(
             p[0], p[1]
         ))
     })?;
+    // The pyramid hangs below the beam's upper face: neither face runs past it.
+    let beam = Line::through(red.point, normal_towards(red.dir, sub(apex, red.point)));
+    if let Some(cut) = faces
+        .iter()
+        .map(|f| f.at(f.span.1))
+        .find(|&end| beam.depth(end) < -MAX_CROSSING_PX)
+    {
+        return Err(not_found(format!(
+            "the line traced through ({:.1}, {:.1}) cuts a face of the pyramid at \
+             ({:.1}, {:.1}): it is not the beam's upper face",
+            p[0], p[1], cut[0], cut[1]
+        )));
+    }
     Ok((red, p))
 }
 

@@ -35,7 +35,7 @@ const REST_BEND_SIGMA_PX: f64 = 0.03;
 /// Faces whose bases lie this close (as a share of the farther one's distance) to
 /// equally far from the apex's foot along the beam do not tell which way its free end
 /// is (see `free_end`).
-const SYMMETRIC_BASES: f64 = 0.2;
+pub(super) const SYMMETRIC_BASES: f64 = 0.2;
 /// Smallest mean grey-level difference between the two sides of the clicked pixels (3 to
 /// 6 px from them) from which an edge's polarity is taken: a face 5 levels above or
 /// below its background on a reference with noise 3 measures 4-6, blank ground 0-1.
