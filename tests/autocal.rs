@@ -172,14 +172,12 @@ fn auto_calibration_over_real_backgrounds_reads_and_tracks_as_hand_clicks_do() {
     let hand = score(&truths, &hand_e);
     let auto = score(&truths, &auto_e);
     println!("hand clicks: {hand:?}\nautomatic:   {auto:?}");
-    // Measured: 11 of 12 references calibrate, of either polarity, within 0.003-0.094
-    // deg of the hand clicks (each within 3 standard errors of a difference); the
-    // tracked frames score as with hand clicks (median 0.0277 against 0.0262 deg,
-    // p95 0.244 against 0.286, detection equal). The one that fails, session 1 (a dark
-    // probe over bright texture), fails with the reason, never a wrong block: beside
-    // its apex the probe is as dark as the texture, so the ring around the apex does
-    // not show the pyramid and its beam edge is not found.
-    assert!(failed.len() <= 1, "sessions {failed:?} not calibrated");
+    // Measured: all 12 references calibrate, of either polarity, within 0.003-0.094
+    // deg of the hand clicks (each within 3 standard errors of a difference; session
+    // 1, a dark probe over bright texture found on the rays from the apex, 0.041 of
+    // 0.205 allowed); the tracked frames score as with hand clicks (median 0.0275
+    // against 0.0259 deg, p95 0.222 against 0.245, detection equal).
+    assert!(failed.is_empty(), "sessions {failed:?} not calibrated");
     assert!(auto.detect_rate >= hand.detect_rate - 0.005, "{auto:?}");
     assert!(auto.false_detections <= hand.false_detections, "{auto:?}");
     assert!(

@@ -19,6 +19,13 @@
 //!    much further towards the clamp (usually out of the frame) than to the free end.
 //!    A beam edge that the faces run past is not the beam's upper face, and refused.
 //!
+//! Where that gives no calibration (beside the apex the probe is as bright as its
+//! ground, so the ring does not show the pyramid), the faces are looked for again as
+//! the two rays from the apex with the strongest steps along them over 6-150 px, of
+//! opposite sides and one polarity; each is traced both ways from its strongest
+//! stretch and must run over a third of its length (apex to beam), the ground's level
+//! for the beam's edge is taken outside the faces, and the rest is as above.
+//!
 //! Without a click, the apex is the point of the largest body touching a frame side
 //! (grey levels above Otsu's level, or above the level splitting the bright class, the
 //! probe being the brightest) farthest from its beam's axis.
@@ -41,6 +48,18 @@ const ARC_DEG: (f64, f64) = (8.0, 150.0);
 /// A profile across an edge: its levels averaged between these depths (pixels) on
 /// each side, the crossing searched within the outer one.
 const LEVEL_PX: (f64, f64) = (1.5, 4.0);
+/// The stretch of the rays from the apex (pixels) over which their steps are averaged
+/// when the ring does not show the pyramid, and how far either side of a ray its levels
+/// are taken.
+const RAYS_PX: (usize, usize) = (6, 150);
+const RAY_SIDE_PX: f64 = 1.5;
+/// The weakest mean step along a face found on the rays, grey levels.
+const MIN_STEP: f64 = 4.0;
+/// Share of its length (apex to the beam's upper face) over which a face found on the
+/// rays must be traced.
+const MIN_FACE_SHARE: f64 = 1.0 / 3.0;
+/// How far outside a face the ground's level is taken, pixels.
+const GROUND_PX: f64 = 4.0;
 /// Where the faces' tracing starts, pixels from the apex (the wedge is narrow nearer).
 const FACE_START_PX: f64 = 6.0;
 /// A profile counts while its step is at least this share of the edge's first steps;
@@ -95,13 +114,31 @@ pub fn auto_calibrate(
     apex: Option<[f64; 2]>,
     cfg: &TrackerConfig,
 ) -> Result<(AutoClicks, Calibration), AutoCalError> {
-    let clicks = match apex {
-        Some(a) => clicks_from_apex(reference, a)?,
-        None => clicks_from_apex(reference, find_apex(reference)?)?,
+    let apex = match apex {
+        Some(a) => a,
+        None => find_apex(reference)?,
     };
-    let config = clicks.config("reference".into());
-    let calibration = Calibration::from_reference(reference, &config, cfg)?;
-    Ok((clicks, calibration))
+    let calibrate = |search: Search| -> Result<(AutoClicks, Calibration), AutoCalError> {
+        let clicks = clicks_by(reference, apex, search)?;
+        let config = clicks.config("reference".into());
+        let calibration = Calibration::from_reference(reference, &config, cfg)?;
+        Ok((clicks, calibration))
+    };
+    // The rays only where the ring does not give a calibration; its reason is the one
+    // reported when neither does.
+    calibrate(Search::Ring).or_else(|ring| calibrate(Search::Rays).map_err(|_| ring))
+}
+
+/// How the pyramid's faces are looked for around the apex.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Search {
+    /// The arc that stands out on a ring of [`RING_PX`] around the apex; each face
+    /// traced from the apex outward.
+    Ring,
+    /// The two rays from the apex with the strongest steps along them, over
+    /// [`RAYS_PX`] (where the probe beside the apex is as bright as its ground); each
+    /// face traced both ways from its strongest stretch.
+    Rays,
 }
 
 /// Bilinear grey level at `p`, `None` outside the image.
@@ -134,6 +171,8 @@ fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
 struct Wedge {
     ends: [f64; 2],
     polarity: f64,
+    /// Where along each face (pixels from the apex) its step is strongest.
+    strongest: [f64; 2],
 }
 
 fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
@@ -203,7 +242,111 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
     }
     // The arc's ends at half a sample outside its first and last samples.
     let ends = [(start as f64 - 0.5) * step, (end as f64 + 0.5) * step];
-    Ok(Wedge { ends, polarity })
+    Ok(Wedge {
+        ends,
+        polarity,
+        strongest: [FACE_START_PX; 2],
+    })
+}
+
+/// The step across the ray from `apex` at `angle` (radians) at each whole pixel of
+/// [`RAYS_PX`] along it: the level a little counter-clockwise (in image angles) of it
+/// less the level a little clockwise; `None` where outside the image.
+fn ray_steps(img: &GrayImage, apex: [f64; 2], angle: f64) -> Vec<Option<f64>> {
+    let u = unit(angle);
+    let n = scale([-u[1], u[0]], RAY_SIDE_PX);
+    (RAYS_PX.0..RAYS_PX.1)
+        .map(|r| {
+            let p = add(apex, scale(u, r as f64));
+            Some(grey(img, add(p, n))? - grey(img, sub(p, n))?)
+        })
+        .collect()
+}
+
+/// The pyramid as the two rays from `apex` with the strongest steps along them (the
+/// mean over [`RAYS_PX`]), opening by [`ARC_DEG`], the probe's side of each where the
+/// other ray is and of one polarity: in image angles, the probe is brighter (or
+/// darker) counter-clockwise of the first and clockwise of the second.
+fn rays(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
+    let step = std::f64::consts::TAU / RING_SAMPLES as f64;
+    let mean_step: Vec<f64> = (0..RING_SAMPLES)
+        .map(|k| {
+            let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step)
+                .into_iter()
+                .flatten()
+                .collect();
+            if 2 * steps.len() < RAYS_PX.1 - RAYS_PX.0 {
+                0.0
+            } else {
+                steps.iter().sum::<f64>() / steps.len() as f64
+            }
+        })
+        .collect();
+    let widths = (ARC_DEG.0.to_radians() / step).ceil() as usize
+        ..=(ARC_DEG.1.to_radians() / step).floor() as usize;
+    let mut best: Option<(f64, usize, usize, f64)> = None;
+    for polarity in [1.0, -1.0] {
+        for first in 0..RING_SAMPLES {
+            for width in widths.clone() {
+                let second = (first + width) % RING_SAMPLES;
+                let score = (polarity * mean_step[first]).min(-polarity * mean_step[second]);
+                if best.is_none_or(|b| score > b.0) {
+                    best = Some((score, first, first + width, polarity));
+                }
+            }
+        }
+    }
+    let not_found = |reason: String| AutoCalError::NotFound {
+        edges: "blue and green edges",
+        reason,
+    };
+    let Some((_, first, second, polarity)) = best.filter(|b| b.0 >= MIN_STEP) else {
+        return Err(not_found(format!(
+            "no two rays from ({:.1}, {:.1}) have steps of {MIN_STEP} grey levels along them",
+            apex[0], apex[1]
+        )));
+    };
+    // Where along each ray its step is strongest, summed over FACE_START_PX either side.
+    let strongest = [first, second].map(|k| {
+        let sign = if k == first { polarity } else { -polarity };
+        let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step)
+            .into_iter()
+            .map(|v| sign * v.unwrap_or(0.0))
+            .collect();
+        let half = FACE_START_PX as usize;
+        let window = |i: usize| -> f64 {
+            steps[i.saturating_sub(half)..(i + half + 1).min(steps.len())]
+                .iter()
+                .sum()
+        };
+        let best = (0..steps.len())
+            .max_by(|&a, &b| window(a).total_cmp(&window(b)))
+            .unwrap_or(0);
+        (RAYS_PX.0 + best) as f64
+    });
+    Ok(Wedge {
+        ends: [first as f64 * step, second as f64 * step],
+        polarity,
+        strongest,
+    })
+}
+
+/// The ground's level just outside the two faces, along their traced stretches.
+fn ground_level(img: &GrayImage, faces: &[Traced; 2], axis: [f64; 2]) -> f64 {
+    let mut levels = Vec::new();
+    for f in faces {
+        let out = scale(normal_towards(f.dir, sub(f.dir, axis)), GROUND_PX);
+        let (a, b) = f.span;
+        let mut t = a;
+        while t <= b {
+            if let Some(v) = grey(img, add(f.at(t), out)) {
+                levels.push(v);
+            }
+            t += 1.0;
+        }
+    }
+    levels.sort_by(f64::total_cmp);
+    levels.get(levels.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// One profile across an edge at `centre`, inward normal `n`: the crossing of the mid
@@ -311,6 +454,10 @@ impl Traced {
         add(self.point, scale(self.dir, t))
     }
 
+    fn length(&self) -> f64 {
+        self.span.1 - self.span.0
+    }
+
     /// Points at the given shares of the traced span.
     fn clicks(&self, shares: &[f64]) -> Vec<[f64; 2]> {
         let (a, b) = self.span;
@@ -341,7 +488,15 @@ fn traced(points: &[[f64; 2]], dir: [f64; 2]) -> Option<Traced> {
 
 /// The edges from a click near the apex.
 pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, AutoCalError> {
-    let w = wedge(img, apex)?;
+    clicks_by(img, apex, Search::Ring)
+}
+
+/// The edges from a click near the apex, the faces looked for by `search`.
+fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClicks, AutoCalError> {
+    let w = match search {
+        Search::Ring => wedge(img, apex)?,
+        Search::Rays => rays(img, apex)?,
+    };
     let dirs = w.ends.map(unit);
     let axis = {
         let s = add(dirs[0], dirs[1]);
@@ -351,14 +506,17 @@ pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, A
     // second time along the line the first found, from the apex it implies.
     let mut faces = [None; 2];
     for k in 0..2 {
-        let (pts, _) = trace(
-            img,
-            apex,
-            dirs[k],
-            sub(axis, dirs[k]),
-            w.polarity,
-            FACE_START_PX,
-        );
+        let inside = sub(axis, dirs[k]);
+        let pts = match search {
+            Search::Ring => trace(img, apex, dirs[k], inside, w.polarity, FACE_START_PX).0,
+            Search::Rays => {
+                let from = add(apex, scale(dirs[k], w.strongest[k]));
+                let (mut pts, _) = trace(img, from, dirs[k], inside, w.polarity, 0.0);
+                let (back, _) = trace(img, from, scale(dirs[k], -1.0), inside, w.polarity, 1.0);
+                pts.extend(back);
+                pts
+            }
+        };
         faces[k] = traced(&pts, dirs[k]);
     }
     let (Some(f0), Some(f1)) = (faces[0], faces[1]) else {
@@ -376,12 +534,47 @@ pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, A
     };
     let line = |t: &Traced| Line::through(t.point, [-t.dir[1], t.dir[0]]);
     let apex = line(&f0).intersect(&line(&f1)).unwrap_or(apex);
-    let faces = [f0, f1].map(|f| {
-        let inside = sub(axis, f.dir);
-        let (pts, _) = trace(img, apex, f.dir, inside, w.polarity, FACE_START_PX);
-        traced(&pts, f.dir).unwrap_or(f)
-    });
-    let (red, exit) = red_edge(img, apex, axis, &faces, w.polarity)?;
+    let faces = match search {
+        Search::Ring => [f0, f1].map(|f| {
+            let inside = sub(axis, f.dir);
+            let (pts, _) = trace(img, apex, f.dir, inside, w.polarity, FACE_START_PX);
+            traced(&pts, f.dir).unwrap_or(f)
+        }),
+        // Their steps fade towards the apex: the lines stand as traced, each from near
+        // the apex they imply to its far end.
+        Search::Rays => [f0, f1].map(|f| Traced {
+            span: (dot(sub(apex, f.point), f.dir) + FACE_START_PX, f.span.1),
+            ..f
+        }),
+    };
+    // The ground's level: beyond the apex, or (where the probe beside the apex is as
+    // bright as its ground) outside the faces.
+    let ground = match search {
+        Search::Ring => None,
+        Search::Rays => Some(ground_level(img, &faces, axis)),
+    };
+    let (red, exit) = red_edge(img, apex, axis, &faces, w.polarity, ground)?;
+    if search == Search::Rays {
+        // Faces found away from the apex must be traced over a good share of their
+        // length, or the calibration would rest on a short stretch of them.
+        let beam = Line::through(red.point, [-red.dir[1], red.dir[0]]);
+        for f in [f0, f1] {
+            let line = Line::through(f.point, [-f.dir[1], f.dir[0]]);
+            let length = beam
+                .intersect(&line)
+                .map_or(0.0, |base| norm(sub(base, apex)));
+            if f.length() < MIN_FACE_SHARE * length {
+                return Err(AutoCalError::NotFound {
+                    edges: "a face of the pyramid",
+                    reason: format!(
+                        "on the rays from the apex a face's step runs over {:.0} px of its \
+                         {length:.0}",
+                        f.length()
+                    ),
+                });
+            }
+        }
+    }
     let clamp_along_red = match back_face_side(&red, apex, &faces) {
         Some(side) => side > 0.0,
         // Faces as steep as each other: the beam runs further from the pyramid towards
@@ -408,7 +601,12 @@ pub fn clicks_from_apex(img: &GrayImage, apex: [f64; 2]) -> Result<AutoClicks, A
         dir: clamp,
         span: (free_t, clamp_t.min(free_t + reach)),
     };
-    let shares = [0.2, 0.5, 0.8];
+    // Faces found on the rays are clicked nearly end to end, so that the calibration
+    // follows them over the stretch beside the apex where their steps fade.
+    let shares = match search {
+        Search::Ring => [0.2, 0.5, 0.8],
+        Search::Rays => [0.05, 0.5, 0.95],
+    };
     Ok(AutoClicks {
         red: beam.clicks(&[0.15, 0.5, 0.85]),
         blue: blue.clicks(&shares),
@@ -443,6 +641,7 @@ fn red_edge(
     axis: [f64; 2],
     faces: &[Traced; 2],
     polarity: f64,
+    ground: Option<f64>,
 ) -> Result<(Traced, [f64; 2]), AutoCalError> {
     let not_found = |reason: String| AutoCalError::NotFound {
         edges: "red edge",
@@ -461,7 +660,9 @@ fn red_edge(
     let start = FACE_START_PX.max(0.5 * faces[0].span.1.min(faces[1].span.1));
     let inside =
         level(start).ok_or_else(|| not_found("the pyramid runs out of the frame".into()))?;
-    let outside = level(-RING_PX).unwrap_or(inside - polarity * 60.0);
+    let outside = ground
+        .or_else(|| level(-RING_PX))
+        .unwrap_or(inside - polarity * 60.0);
     let mid = 0.5 * (inside + outside);
     let mut t = start;
     let exit = loop {
