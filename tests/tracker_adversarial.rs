@@ -103,9 +103,9 @@ fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
 
 /// False detections per kind measured on the held-out seed 2027 (1080 frames) with the
 /// per-edge checks (docs/tracker.md, "What the tracker refuses, and why"). The goal is
-/// none on any kind; what remains is mostly a probe of another beam thickness where
-/// the session's reference did not show the beam's. These bounds catch a regression,
-/// and a kind that reaches zero stays there.
+/// none on any kind; what remains is mostly a thicker beam whose faces' ends cannot
+/// both be measured and a mirrored probe with its beam out of view. These bounds
+/// catch a regression, and a kind that reaches zero stays there.
 const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
     ("mirrored", 2),
