@@ -492,7 +492,8 @@ pub fn check_edges(
 
 /// How far either way of the predicted face its step is looked for, pixels.
 const FACE_SEARCH_PX: i64 = 12;
-/// A station locates the face's step where its ratio reaches this.
+/// A station locates the face's step where its ratio reaches this, and shows a face
+/// over its end ([`face_end`]) from there.
 const LOCATED_RATIO: f64 = 0.5;
 /// Steps located along a face that run off its predicted line by at least this angle
 /// belong to a face of another angle, degrees. Located to the pixel, the steps of a
@@ -670,8 +671,6 @@ fn turned_face(
 /// Stations over a face's end, as a share of its predicted length either side of
 /// its base.
 const END_SPAN: f64 = 0.3;
-/// A station over a face's end shows the face from this share of its calibrated step.
-const END_RATIO: f64 = 0.5;
 /// Stations over a face's end that may go against the measured end.
 const END_AGAINST: usize = 1;
 /// How far, as a share of its length, a face may end from its predicted base: the
@@ -703,7 +702,7 @@ fn face_end(
     if p.stations < STATIONS {
         return None;
     }
-    let shows = |k: usize| p.ratio[k] >= END_RATIO;
+    let shows = |k: usize| p.ratio[k] >= LOCATED_RATIO;
     // The splits that best explain the stations: showing the face before, not after.
     let score = |j: usize| {
         (0..j).filter(|&k| shows(k)).count() + (j..STATIONS).filter(|&k| !shows(k)).count()
