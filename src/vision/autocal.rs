@@ -388,7 +388,7 @@ fn crossing(img: &GrayImage, centre: [f64; 2], n: [f64; 2], polarity: f64) -> Op
 }
 
 /// Traces an edge from `origin` along `dir` (inside towards `inside`), from `start`
-/// pixels on: the crossings and how far it ran.
+/// pixels on: the crossings.
 fn trace(
     img: &GrayImage,
     origin: [f64; 2],
@@ -396,10 +396,10 @@ fn trace(
     inside: [f64; 2],
     polarity: f64,
     start: f64,
-) -> (Vec<[f64; 2]>, f64) {
+) -> Vec<[f64; 2]> {
     let n = normal_towards(dir, inside);
     let mut points: Vec<[f64; 2]> = Vec::new();
-    let (mut first_steps, mut misses, mut t, mut reached) = (Vec::new(), 0, start, start);
+    let (mut first_steps, mut misses, mut t) = (Vec::new(), 0, start);
     let limit = (img.width() + img.height()) as f64;
     while t < limit && misses < MISSES {
         let centre = add(origin, scale(dir, t));
@@ -422,13 +422,12 @@ fn trace(
         if step > reference.max(4.0) && x.abs() <= MAX_CROSSING_PX {
             points.push(add(centre, scale(n, x)));
             misses = 0;
-            reached = t;
         } else {
             misses += 1;
         }
         t += 1.0;
     }
-    (points, reached)
+    points
 }
 
 /// Total-least-squares line through points: a point on it and its direction.
@@ -508,11 +507,11 @@ fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClic
     for k in 0..2 {
         let inside = sub(axis, dirs[k]);
         let pts = match search {
-            Search::Ring => trace(img, apex, dirs[k], inside, w.polarity, FACE_START_PX).0,
+            Search::Ring => trace(img, apex, dirs[k], inside, w.polarity, FACE_START_PX),
             Search::Rays => {
                 let from = add(apex, scale(dirs[k], w.strongest[k]));
-                let (mut pts, _) = trace(img, from, dirs[k], inside, w.polarity, 0.0);
-                let (back, _) = trace(img, from, scale(dirs[k], -1.0), inside, w.polarity, 1.0);
+                let mut pts = trace(img, from, dirs[k], inside, w.polarity, 0.0);
+                let back = trace(img, from, scale(dirs[k], -1.0), inside, w.polarity, 1.0);
                 pts.extend(back);
                 pts
             }
@@ -537,7 +536,7 @@ fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClic
     let faces = match search {
         Search::Ring => [f0, f1].map(|f| {
             let inside = sub(axis, f.dir);
-            let (pts, _) = trace(img, apex, f.dir, inside, w.polarity, FACE_START_PX);
+            let pts = trace(img, apex, f.dir, inside, w.polarity, FACE_START_PX);
             traced(&pts, f.dir).unwrap_or(f)
         }),
         // Their steps fade towards the apex: the lines stand as traced, each from near
@@ -705,8 +704,8 @@ fn red_edge(
     }
     let d = best.1;
     let inside = sub(apex, p);
-    let (mut pts, _) = trace(img, p, d, inside, polarity, 0.0);
-    let (back, _) = trace(img, p, scale(d, -1.0), inside, polarity, 1.0);
+    let mut pts = trace(img, p, d, inside, polarity, 0.0);
+    let back = trace(img, p, scale(d, -1.0), inside, polarity, 1.0);
     pts.extend(back);
     let red = traced(&pts, d).ok_or_else(|| {
         not_found(format!(
