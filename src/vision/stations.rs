@@ -137,7 +137,13 @@ impl Profile {
     /// Whether station `k`'s inside lies within [`COVERED_LEVEL`] of the calibrated
     /// step of `probe_level`.
     fn at_probe_level(&self, k: usize, probe_level: f64) -> bool {
-        (self.inside[k] - probe_level).abs() <= COVERED_LEVEL * self.step.abs()
+        self.inside_within(k, probe_level, COVERED_LEVEL)
+    }
+
+    /// Whether station `k`'s inside lies within `share` of the calibrated step of
+    /// `level`.
+    fn inside_within(&self, k: usize, level: f64, share: f64) -> bool {
+        (self.inside[k] - level).abs() <= share * self.step.abs()
     }
 
     /// Whether the stations at the corner end show the edge, with the probe on its
@@ -148,10 +154,7 @@ impl Profile {
     pub fn corner_held(&self) -> bool {
         let probe_level = self.held_level();
         let shown = (0..END_STATIONS)
-            .filter(|&k| {
-                self.held(k)
-                    && (self.inside[k] - probe_level).abs() <= INSIDE_SPREAD * self.step.abs()
-            })
+            .filter(|&k| self.held(k) && self.inside_within(k, probe_level, INSIDE_SPREAD))
             .count();
         shown + 1 >= END_STATIONS
     }
@@ -451,8 +454,6 @@ pub fn check_edges(
         }
         if e != RED && corner {
             faces[e] = Some(((a, b), p, partner));
-        }
-        if e != RED && corner {
             let held = p.corner_held();
             corners += 1;
             hidden += usize::from(!held);
