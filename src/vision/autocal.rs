@@ -457,6 +457,11 @@ impl Traced {
         self.span.1 - self.span.0
     }
 
+    /// The traced line.
+    fn line(&self) -> Line {
+        Line::through(self.point, [-self.dir[1], self.dir[0]])
+    }
+
     /// Points at the given shares of the traced span.
     fn clicks(&self, shares: &[f64]) -> Vec<[f64; 2]> {
         let (a, b) = self.span;
@@ -531,8 +536,7 @@ fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClic
             ),
         });
     };
-    let line = |t: &Traced| Line::through(t.point, [-t.dir[1], t.dir[0]]);
-    let apex = line(&f0).intersect(&line(&f1)).unwrap_or(apex);
+    let apex = f0.line().intersect(&f1.line()).unwrap_or(apex);
     let faces = match search {
         Search::Ring => [f0, f1].map(|f| {
             let inside = sub(axis, f.dir);
@@ -556,11 +560,10 @@ fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClic
     if search == Search::Rays {
         // Faces found away from the apex must be traced over a good share of their
         // length, or the calibration would rest on a short stretch of them.
-        let beam = Line::through(red.point, [-red.dir[1], red.dir[0]]);
+        let beam = red.line();
         for f in [f0, f1] {
-            let line = Line::through(f.point, [-f.dir[1], f.dir[0]]);
             let length = beam
-                .intersect(&line)
+                .intersect(&f.line())
                 .map_or(0.0, |base| norm(sub(base, apex)));
             if f.length() < MIN_FACE_SHARE * length {
                 return Err(AutoCalError::NotFound {
@@ -619,10 +622,9 @@ fn clicks_by(img: &GrayImage, apex: [f64; 2], search: Search) -> Result<AutoClic
 /// not depend on how far the faces were traced). `None` when the two bases lie about
 /// as far from the foot (within [`SYMMETRIC_BASES`]) or a face does not meet the beam.
 fn back_face_side(red: &Traced, apex: [f64; 2], faces: &[Traced; 2]) -> Option<f64> {
-    let line = |t: &Traced| Line::through(t.point, [-t.dir[1], t.dir[0]]);
-    let beam = line(red);
+    let beam = red.line();
     let foot = dot(sub(apex, red.point), red.dir);
-    let base = |f: &Traced| Some(dot(sub(beam.intersect(&line(f))?, red.point), red.dir) - foot);
+    let base = |f: &Traced| Some(dot(sub(beam.intersect(&f.line())?, red.point), red.dir) - foot);
     let bases = [base(&faces[0])?, base(&faces[1])?];
     let (near, far) = if bases[0].abs() <= bases[1].abs() {
         (bases[0], bases[1])
