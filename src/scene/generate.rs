@@ -356,7 +356,7 @@ pub fn suite(seed: u64, sessions: usize, frames_per_session: usize) -> Vec<Sessi
 
 /// One condition of the real-background suite, beyond the real background itself.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Condition {
+pub(super) enum Condition {
     /// The probe 10-20 grey levels from a quiet background (noise at most 5).
     LowContrast,
     /// A bright background (mean 150-185), its texture 0.3-0.45 of the probe's contrast
@@ -395,15 +395,22 @@ const REAL_CONDITIONS: [&[Condition]; 12] = {
 
 /// A session's look over a real background, before the per-frame noise and charging.
 #[derive(Debug, Clone, Copy)]
-struct RealScene {
-    look: Look,
-    noise: (f64, f64),
-    charging: bool,
-    needle: Option<(f64, f64)>,
-    needle_level: f64,
+pub(super) struct RealScene {
+    pub look: Look,
+    /// Range of the frames' noise sigma.
+    pub noise: (f64, f64),
+    pub charging: bool,
+    /// The needle's tilt (degrees) and width (pixels), if one is in view.
+    pub needle: Option<(f64, f64)>,
+    pub needle_level: f64,
 }
 
-fn real_scene(conditions: &[Condition], dark: bool, crops: usize, rng: &mut Rng) -> RealScene {
+pub(super) fn real_scene(
+    conditions: &[Condition],
+    dark: bool,
+    crops: usize,
+    rng: &mut Rng,
+) -> RealScene {
     use Condition::*;
     let has = |c| conditions.contains(&c);
     let mut look = Style::Clean.look();
@@ -473,6 +480,24 @@ fn real_scene(conditions: &[Condition], dark: bool, crops: usize, rng: &mut Rng)
 /// apex, away from the beam and below it, its base beyond the frame's border.
 fn place_needle(scene: &RealScene, spec: &FrameSpec, rng: &mut Rng) -> Option<super::Needle> {
     let (tilt_deg, width) = scene.needle?;
+    Some(needle_beside(
+        spec,
+        tilt_deg,
+        width,
+        scene.needle_level,
+        rng,
+    ))
+}
+
+/// A needle `width_px` wide at its base, tilted by `tilt_deg`, at `level`, beside the
+/// probe of `spec` (see [`place_needle`]).
+pub(super) fn needle_beside(
+    spec: &FrameSpec,
+    tilt_deg: f64,
+    width_px: f64,
+    level: f64,
+    rng: &mut Rng,
+) -> super::Needle {
     let away = if spec.entry == Entry::Left { 1.0 } else { -1.0 };
     let (w, h) = (f64::from(spec.width), f64::from(spec.height));
     let tip = [
@@ -481,12 +506,12 @@ fn place_needle(scene: &RealScene, spec: &FrameSpec, rng: &mut Rng) -> Option<su
     ];
     let a = tilt_deg.to_radians();
     let reach = w + h;
-    Some(super::Needle {
+    super::Needle {
         base: [tip[0] + away * reach * a.cos(), tip[1] + reach * a.sin()],
         tip,
-        base_width_px: width,
-        level: scene.needle_level,
-    })
+        base_width_px: width_px,
+        level,
+    }
 }
 
 /// The real-background suite: `sessions` sessions of `frames_per_session` 640x480
