@@ -299,7 +299,7 @@ impl Beam {
 
 /// Undeformed beam direction (clamp -> free end) on screen and the side sign that turns
 /// the CCW normal into the "up" normal (away from the pyramid).
-fn base_direction(pose: &Pose) -> ([f64; 2], f64) {
+pub(super) fn base_direction(pose: &Pose) -> ([f64; 2], f64) {
     let b = pose.base_deg.to_radians();
     match pose.entry {
         Entry::Left => ([b.cos(), -b.sin()], 1.0),
@@ -314,7 +314,7 @@ pub(crate) fn rotate(v: [f64; 2], angle_rad: f64) -> [f64; 2] {
 }
 
 /// The screen vector 90 degrees counter-clockwise from `v`.
-fn ccw_normal(v: [f64; 2]) -> [f64; 2] {
+pub(super) fn ccw_normal(v: [f64; 2]) -> [f64; 2] {
     [v[1], -v[0]]
 }
 

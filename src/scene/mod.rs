@@ -15,6 +15,10 @@
 //! time sequences; [`suite`] generates the tracker's accuracy suite spanning every
 //! condition.
 //!
+//! A spec's own probe may instead be a rigid tool without a cantilever (a needle, the
+//! end of a tipless cantilever, a gripper jaw: [`ToolGeometry`], named straight edges,
+//! truth from [`tool_truth`]).
+//!
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of
 //! the bent beam is [`crate::model`]'s exact elastica; nothing here duplicates it.
@@ -29,6 +33,7 @@ mod render;
 pub mod rng;
 mod session;
 mod spec;
+mod tool;
 
 use std::cell::RefCell;
 
@@ -43,6 +48,10 @@ pub use session::{
     Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
 };
 pub use spec::{FrameSpec, Look, Others, Placement, Style, MAX_OTHER_PROBES};
+pub use tool::{
+    clip_to_frame, tool_truth, Flank, ToolGeometry, ToolKind, ToolTruth, DEFAULT_SPAN_UM, MAX_BOW,
+    TOOL_FLANKS,
+};
 
 thread_local! {
     static RENDERER: RefCell<Renderer> = RefCell::new(Renderer::new());
@@ -58,6 +67,15 @@ pub fn render_into(spec: &FrameSpec, frame: &mut GrayImage) -> Truth {
 /// asks for one (see [`Renderer::render_over`]).
 pub fn render_over_into(spec: &FrameSpec, crops: &[GrayImage], frame: &mut GrayImage) -> Truth {
     RENDERER.with(|r| r.borrow_mut().render_over(spec, crops, frame))
+}
+
+/// Renders `spec`, whose own probe is a tool, over the caller's crops (as
+/// [`render_over_into`]) and returns the tool's truth. A spec without a tool is a
+/// caller's error.
+pub fn render_tool_into(spec: &FrameSpec, crops: &[GrayImage], frame: &mut GrayImage) -> ToolTruth {
+    let truth = tool_truth(spec);
+    render_over_into(spec, crops, frame);
+    truth.expect("render_tool_into draws a spec with a tool")
 }
 
 /// Renders `spec` into a new frame.

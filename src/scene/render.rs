@@ -13,6 +13,7 @@ use super::geometry::{probe_outline, Edges};
 use super::raster::Rasterizer;
 use super::rng::{add_gaussian_noise, sub_seed, Rng};
 use super::spec::FrameSpec;
+use super::tool::tool_outline;
 
 /// The true values of everything the tracker reports for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,7 +29,8 @@ pub struct Truth {
     pub tip_y: f64,
     pub magnification: f64,
     pub px_per_um: f64,
-    /// The three tracked edges (None when not in view).
+    /// The three tracked edges (None when not in view, and for a tool: see
+    /// [`super::tool_truth`]).
     pub edges: Option<Edges>,
 }
 
@@ -182,13 +184,25 @@ impl Renderer {
             return truth_from(spec, None);
         }
         let w = spec.width as usize;
-        let edges = probe_outline(
-            &spec.probe,
-            &spec.pose(),
-            spec.width,
-            spec.height,
-            &mut self.polygon,
-        );
+        let edges = match &spec.tool {
+            Some(tool) => {
+                tool_outline(
+                    tool,
+                    &spec.pose(),
+                    spec.width,
+                    spec.height,
+                    &mut self.polygon,
+                );
+                None
+            }
+            None => Some(probe_outline(
+                &spec.probe,
+                &spec.pose(),
+                spec.width,
+                spec.height,
+                &mut self.polygon,
+            )),
+        };
         let look = spec.look;
         if look.edge_bias_px != 0.0 {
             // The imaged outline: every side moved out by the bias (mitred corners, so
@@ -209,7 +223,7 @@ impl Renderer {
         } else {
             paint_over(&mut self.raster, &self.polygon, &mut self.canvas, w, level);
         }
-        truth_from(spec, Some(edges))
+        truth_from(spec, edges)
     }
 
     /// Shifts a random `jitter_fraction` of the rows one pixel left or right.
@@ -241,21 +255,24 @@ pub fn truth_of(spec: &FrameSpec) -> Truth {
         return truth_from(spec, None);
     }
     let mut outline = Vec::new();
-    let edges = probe_outline(
-        &spec.probe,
-        &spec.pose(),
-        spec.width,
-        spec.height,
-        &mut outline,
-    );
-    truth_from(spec, Some(edges))
+    let edges = spec.tool.is_none().then(|| {
+        probe_outline(
+            &spec.probe,
+            &spec.pose(),
+            spec.width,
+            spec.height,
+            &mut outline,
+        )
+    });
+    truth_from(spec, edges)
 }
 
-/// The truth of `spec`'s probe with its true `edges` (none: out of view).
+/// The truth of `spec`'s probe with its true `edges` (none for a tool, whose edges
+/// [`super::tool_truth`] gives; its force is NaN).
 fn truth_from(spec: &FrameSpec, edges: Option<Edges>) -> Truth {
     let ppu = spec.px_per_um();
-    match edges {
-        None => Truth {
+    if spec.blank {
+        return Truth {
             probe_in_view: false,
             angle_deg: f64::NAN,
             force_nn: f64::NAN,
@@ -264,17 +281,21 @@ fn truth_from(spec: &FrameSpec, edges: Option<Edges>) -> Truth {
             magnification: spec.magnification,
             px_per_um: ppu,
             edges: None,
+        };
+    }
+    Truth {
+        probe_in_view: true,
+        angle_deg: spec.angle_deg,
+        force_nn: if spec.tool.is_some() {
+            f64::NAN
+        } else {
+            force_nn(spec)
         },
-        Some(edges) => Truth {
-            probe_in_view: true,
-            angle_deg: spec.angle_deg,
-            force_nn: force_nn(spec),
-            tip_x: spec.apex_px[0],
-            tip_y: spec.apex_px[1],
-            magnification: spec.magnification,
-            px_per_um: ppu,
-            edges: Some(edges),
-        },
+        tip_x: spec.apex_px[0],
+        tip_y: spec.apex_px[1],
+        magnification: spec.magnification,
+        px_per_um: ppu,
+        edges,
     }
 }
 

@@ -4,6 +4,7 @@
 
 use super::background::{Needle, RealLook};
 use super::geometry::{px_per_um, Entry, Pose, ProbeGeometry};
+use super::tool::ToolGeometry;
 use crate::vision::MAX_PROBES;
 
 /// The looks of the public samples, from an easy frame to a hard one.
@@ -165,6 +166,10 @@ pub struct FrameSpec {
     /// More probes in the same view, drawn after the first with the frame's look; none
     /// in every preset.
     pub others: Others,
+    /// A rigid tool drawn instead of the cantilever as the frame's own (first) probe,
+    /// posed by `entry`, `base_deg`, `angle_deg` and `apex_px`; its truth is
+    /// [`crate::scene::tool_truth`]. None in every preset.
+    pub tool: Option<ToolGeometry>,
 }
 
 /// Most probes a frame shows besides its first.
@@ -227,6 +232,7 @@ impl FrameSpec {
             blank: false,
             seed,
             others: Others::NONE,
+            tool: None,
         }
     }
 
@@ -249,14 +255,16 @@ impl FrameSpec {
 
     /// Probe `k` of the frame (0: its own, then the others in order) as a frame of that
     /// probe alone, with this frame's size, magnification, look and seed; its truth is
-    /// [`crate::scene::truth_of`] of it.
+    /// [`crate::scene::truth_of`] of it. The others are cantilevers: only probe 0 may be
+    /// a tool.
     pub fn nth_probe(&self, k: usize) -> Option<FrameSpec> {
-        let place = match k {
-            0 => self.placement(),
-            k => *self.others.iter().nth(k - 1)?,
+        let (place, tool) = match k {
+            0 => (self.placement(), self.tool),
+            k => (*self.others.iter().nth(k - 1)?, None),
         };
         Some(FrameSpec {
             others: Others::NONE,
+            tool,
             ..self.placing(place)
         })
     }

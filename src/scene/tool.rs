@@ -1,0 +1,539 @@
+//! Rigid probes without a cantilever: a tungsten needle with a blunt end, the end of a
+//! tipless cantilever, a gripper jaw. Each is a rigid polygon with three named straight
+//! edges, two flanks and an end face between them, reaching from beyond the frame's
+//! border to its end in view. A [`FrameSpec`] with a [`ToolGeometry`] in `tool` draws it
+//! instead of the cantilever, posed by the spec's entry side, base tilt, angle (a
+//! rotation about the apex) and apex pixel, with the spec's look; [`tool_truth`] gives
+//! its true edges and apex.
+//!
+//! The tool's axis points from its base (beyond the entry side) to its end; "up" is the
+//! side of the beam's upper face in [`super::ProbeGeometry`]'s frames (screen up for a
+//! level tool from either side). The up-side flank is edge 0 of
+//! [`ToolKind::edge_names`], the down-side flank edge 1, the end face edge 2.
+//!
+//! A flank may bow (a needle's does): it is drawn as a gentle parabolic arc over its
+//! `span_um` from the end face's corner and runs straight on beyond it along the arc's
+//! end tangent; its true edge is the chord, the straight line through the arc's ends.
+
+use super::geometry::{base_direction, ccw_normal, Pose, Segment};
+use super::rng::Rng;
+use super::spec::FrameSpec;
+
+/// What kind of rigid tool a frame shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ToolKind {
+    /// A tapered tungsten needle with a short, blunt end face.
+    Needle,
+    /// The end of a tipless cantilever seen edge-on: parallel faces, a square end.
+    Tipless,
+    /// A gripper jaw: a wide finger, straight on its gripping (inner) side, with a
+    /// square end.
+    Gripper,
+}
+
+/// Index in [`ToolKind::edge_names`] (and [`ToolGeometry::flanks`]) of the up-side flank.
+const UP: usize = 0;
+/// Index of the down-side flank.
+const DOWN: usize = 1;
+/// Index of the end face.
+const END: usize = 2;
+/// Number of flanks of every tool.
+pub const TOOL_FLANKS: usize = 2;
+
+impl ToolKind {
+    pub const ALL: [ToolKind; 3] = [ToolKind::Needle, ToolKind::Tipless, ToolKind::Gripper];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ToolKind::Needle => "needle",
+            ToolKind::Tipless => "tipless",
+            ToolKind::Gripper => "gripper",
+        }
+    }
+
+    /// The edges, in truth order: up-side flank, down-side flank, end face.
+    pub fn edge_names(self) -> &'static [&'static str] {
+        match self {
+            ToolKind::Needle => &["upper", "lower", "end"],
+            ToolKind::Tipless => &["top", "bottom", "end"],
+            ToolKind::Gripper => &["outer", "inner", "end"],
+        }
+    }
+
+    /// The two edges whose lines meet at the apex: a flank and the end face.
+    pub fn apex_edges(self) -> [&'static str; 2] {
+        let names = self.edge_names();
+        [names[self.apex_flank()], names[END]]
+    }
+
+    /// The flank whose corner with the end face is the apex (a gripper's inner side).
+    fn apex_flank(self) -> usize {
+        match self {
+            ToolKind::Gripper => DOWN,
+            ToolKind::Needle | ToolKind::Tipless => UP,
+        }
+    }
+}
+
+/// One flank of a tool.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Flank {
+    /// Angle between the flank and the tool's axis, opening toward the base, degrees.
+    pub angle_deg: f64,
+    /// Sagitta of the flank's bow as a fraction of its span, positive bulging outward;
+    /// 0 is straight.
+    pub bow: f64,
+    /// Length of the bowed part, from the end face's corner, micrometres: the true
+    /// edge's chord. Beyond it the flank runs straight on.
+    pub span_um: f64,
+}
+
+/// Dimensions of a tool, micrometres and degrees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolGeometry {
+    pub kind: ToolKind,
+    /// Length of the end face (a tipless cantilever's thickness).
+    pub end_um: f64,
+    /// Tilt of the end face from perpendicular to the axis, degrees; positive puts the
+    /// up-side corner ahead of the down-side one.
+    pub end_tilt_deg: f64,
+    /// The up-side and down-side flanks (needle `upper`, `lower`; tipless `top`,
+    /// `bottom`; gripper `outer`, `inner`).
+    pub flanks: [Flank; TOOL_FLANKS],
+}
+
+/// Span of the flanks' bowed part of [`ToolGeometry::typical`] and
+/// [`ToolGeometry::random`], micrometres: about the field of a 2000x frame.
+pub const DEFAULT_SPAN_UM: f64 = 60.0;
+/// Largest bow of a needle's flank, as a fraction of its span.
+pub const MAX_BOW: f64 = 0.003;
+
+impl ToolGeometry {
+    /// A typical tool of `kind`.
+    pub fn typical(kind: ToolKind) -> Self {
+        let flank = |angle_deg, bow| Flank {
+            angle_deg,
+            bow,
+            span_um: DEFAULT_SPAN_UM,
+        };
+        let (end_um, end_tilt_deg, flanks) = match kind {
+            ToolKind::Needle => (2.0, 0.0, [flank(8.0, 0.002), flank(8.0, -0.001)]),
+            ToolKind::Tipless => (3.0, 4.0, [flank(0.0, 0.0), flank(0.0, 0.0)]),
+            ToolKind::Gripper => (4.5, 2.0, [flank(9.0, 0.0), flank(1.0, 0.0)]),
+        };
+        ToolGeometry {
+            kind,
+            end_um,
+            end_tilt_deg,
+            flanks,
+        }
+    }
+
+    /// A random tool of `kind`, deterministic from `seed`: a needle's end 1-3 um, its
+    /// flanks together 12-24 deg apart, each bowed by up to [`MAX_BOW`], its end tilted
+    /// up to 12 deg; a tipless cantilever 1.5-4 um thick, its end within 10 deg of
+    /// square; a gripper jaw's end 3-6 um, its flanks 5-15 deg apart, the inner one
+    /// within 1.5 deg of the axis, its end within 5 deg of square.
+    pub fn random(kind: ToolKind, seed: u64) -> Self {
+        let mut rng = Rng::new(seed);
+        let flank = |angle_deg, bow| Flank {
+            angle_deg,
+            bow,
+            span_um: DEFAULT_SPAN_UM,
+        };
+        let (end_um, end_tilt_deg, flanks) = match kind {
+            ToolKind::Needle => {
+                let end = rng.uniform(1.0, 3.0);
+                let tilt = rng.uniform(-12.0, 12.0);
+                let half = 0.5 * rng.uniform(12.0, 24.0);
+                let skew = rng.uniform(-1.5, 1.5);
+                let bows = [
+                    rng.uniform(-MAX_BOW, MAX_BOW),
+                    rng.uniform(-MAX_BOW, MAX_BOW),
+                ];
+                (
+                    end,
+                    tilt,
+                    [flank(half + skew, bows[0]), flank(half - skew, bows[1])],
+                )
+            }
+            ToolKind::Tipless => {
+                let end = rng.uniform(1.5, 4.0);
+                let tilt = rng.uniform(-10.0, 10.0);
+                (end, tilt, [flank(0.0, 0.0), flank(0.0, 0.0)])
+            }
+            ToolKind::Gripper => {
+                let end = rng.uniform(3.0, 6.0);
+                let tilt = rng.uniform(-5.0, 5.0);
+                let taper = rng.uniform(5.0, 15.0);
+                let inner = rng.uniform(0.0, 1.5);
+                (end, tilt, [flank(taper - inner, 0.0), flank(inner, 0.0)])
+            }
+        };
+        ToolGeometry {
+            kind,
+            end_um,
+            end_tilt_deg,
+            flanks,
+        }
+    }
+}
+
+/// The truth of a tool frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ToolTruth {
+    /// The tool is drawn (false for a blank frame).
+    pub in_view: bool,
+    /// Rotation from the reference pose, degrees CCW on screen (NaN when blank).
+    pub angle_deg: f64,
+    /// The tip point: where the two [`ToolKind::apex_edges`] meet (NaN when blank).
+    pub apex_px: [f64; 2],
+    pub px_per_um: f64,
+    /// The true edges in [`ToolKind::edge_names`] order (none when blank): each flank
+    /// its chord from the end face's corner back over its span, the end face from the
+    /// apex to the other corner.
+    pub edges: Vec<(&'static str, Segment)>,
+}
+
+impl ToolTruth {
+    /// The true edge called `name`.
+    pub fn edge(&self, name: &str) -> Option<Segment> {
+        self.edges.iter().find(|(n, _)| *n == name).map(|&(_, s)| s)
+    }
+}
+
+/// The truth of `spec`'s tool without drawing it (none if the spec has no tool).
+pub fn tool_truth(spec: &FrameSpec) -> Option<ToolTruth> {
+    let tool = spec.tool?;
+    let ppu = spec.px_per_um();
+    if spec.blank {
+        return Some(ToolTruth {
+            in_view: false,
+            angle_deg: f64::NAN,
+            apex_px: [f64::NAN; 2],
+            px_per_um: ppu,
+            edges: Vec::new(),
+        });
+    }
+    let placed = Placed::new(&tool, &spec.pose());
+    let names = tool.kind.edge_names();
+    let mut edges: Vec<(&'static str, Segment)> = (0..TOOL_FLANKS)
+        .map(|k| {
+            let to = add(placed.corner[k], scale(placed.back[k], placed.span_px[k]));
+            (
+                names[k],
+                Segment {
+                    from: placed.corner[k],
+                    to,
+                },
+            )
+        })
+        .collect();
+    let apex = tool.kind.apex_flank();
+    edges.push((
+        names[END],
+        Segment {
+            from: placed.corner[apex],
+            to: placed.corner[1 - apex],
+        },
+    ));
+    Some(ToolTruth {
+        in_view: true,
+        angle_deg: spec.angle_deg,
+        apex_px: spec.apex_px,
+        px_per_um: ppu,
+        edges,
+    })
+}
+
+/// The part of `segment` inside a `width` x `height` frame's pixel area (pixel centres
+/// at integers, so x from -0.5 to width - 0.5), from the end nearer `segment.from`.
+pub fn clip_to_frame(segment: &Segment, width: u32, height: u32) -> Option<Segment> {
+    let d = sub(segment.to, segment.from);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    let bounds = [
+        (0, -0.5, f64::from(width) - 0.5),
+        (1, -0.5, f64::from(height) - 0.5),
+    ];
+    for (axis, lo, hi) in bounds {
+        let p = segment.from[axis];
+        if d[axis].abs() < 1e-12 {
+            if p < lo || p > hi {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo - p) / d[axis], (hi - p) / d[axis]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    (t0 < t1).then(|| Segment {
+        from: add(segment.from, scale(d, t0)),
+        to: add(segment.from, scale(d, t1)),
+    })
+}
+
+/// Segments of each flank's drawn arc.
+const ARC_SEGMENTS: usize = 64;
+
+/// Writes the outline of `tool` posed by `pose` (pixels, one closed polygon reaching
+/// well beyond a `width` x `height` frame) into `outline`.
+pub(super) fn tool_outline(
+    tool: &ToolGeometry,
+    pose: &Pose,
+    width: u32,
+    height: u32,
+    outline: &mut Vec<[f64; 2]>,
+) {
+    let placed = Placed::new(tool, pose);
+    // Far enough from any flank point in view to leave the frame from it.
+    let reach = 2.5 * f64::from(width).hypot(f64::from(height)) + 20.0;
+    outline.clear();
+    outline.push(placed.far(UP, reach));
+    outline.extend((0..=ARC_SEGMENTS).rev().map(|i| placed.point(UP, i)));
+    outline.extend((0..=ARC_SEGMENTS).map(|i| placed.point(DOWN, i)));
+    outline.push(placed.far(DOWN, reach));
+}
+
+/// A tool placed in a frame: its corners and flanks in pixels.
+struct Placed {
+    /// The end face's corners on the up and down sides.
+    corner: [[f64; 2]; TOOL_FLANKS],
+    /// Each flank's chord direction, away from the end (unit).
+    back: [[f64; 2]; TOOL_FLANKS],
+    /// Each flank's outward normal (unit).
+    out: [[f64; 2]; TOOL_FLANKS],
+    span_px: [f64; TOOL_FLANKS],
+    sagitta_px: [f64; TOOL_FLANKS],
+}
+
+impl Placed {
+    fn new(tool: &ToolGeometry, pose: &Pose) -> Placed {
+        let (base, side) = base_direction(pose);
+        let axis = super::geometry::rotate(base, pose.angle_deg.to_radians());
+        let up = scale(ccw_normal(axis), side);
+        let ppu = pose.px_per_um;
+        let tilt = tool.end_tilt_deg.to_radians();
+        // Down-side corner -> up-side corner, half its length.
+        let half = scale(
+            add(scale(up, tilt.cos()), scale(axis, tilt.sin())),
+            0.5 * tool.end_um * ppu,
+        );
+        // The apex exactly on its pixel, the other corner the whole face away.
+        let apex = tool.kind.apex_flank();
+        let mut corner = [pose.apex_px; TOOL_FLANKS];
+        let toward = if apex == UP { -1.0 } else { 1.0 };
+        corner[1 - apex] = add(pose.apex_px, scale(half, 2.0 * toward));
+        let flank = |k: usize| {
+            let a = tool.flanks[k].angle_deg.to_radians();
+            let sign = if k == UP { 1.0 } else { -1.0 };
+            (
+                add(scale(axis, -a.cos()), scale(up, sign * a.sin())),
+                add(scale(up, sign * a.cos()), scale(axis, a.sin())),
+            )
+        };
+        let span_px = tool.flanks.map(|f| f.span_um * ppu);
+        Placed {
+            corner,
+            back: [flank(UP).0, flank(DOWN).0],
+            out: [flank(UP).1, flank(DOWN).1],
+            span_px,
+            sagitta_px: [
+                tool.flanks[UP].bow * span_px[UP],
+                tool.flanks[DOWN].bow * span_px[DOWN],
+            ],
+        }
+    }
+
+    /// Point `i` of [`ARC_SEGMENTS`] along flank `k`'s arc, from the corner.
+    fn point(&self, k: usize, i: usize) -> [f64; 2] {
+        let t = i as f64 / ARC_SEGMENTS as f64;
+        let along = scale(self.back[k], t * self.span_px[k]);
+        let off = scale(self.out[k], 4.0 * self.sagitta_px[k] * t * (1.0 - t));
+        add(add(self.corner[k], along), off)
+    }
+
+    /// A point `reach` beyond the end of flank `k`'s arc, along its end tangent.
+    fn far(&self, k: usize, reach: f64) -> [f64; 2] {
+        let tangent = sub(
+            scale(self.back[k], self.span_px[k]),
+            scale(self.out[k], 4.0 * self.sagitta_px[k]),
+        );
+        let len = tangent[0].hypot(tangent[1]).max(1e-12);
+        add(self.point(k, ARC_SEGMENTS), scale(tangent, reach / len))
+    }
+}
+
+fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] + b[0], a[1] + b[1]]
+}
+
+fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
+    [a[0] * k, a[1] * k]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::geometry::{rotate, Entry};
+    use super::super::spec::Style;
+    use super::*;
+
+    /// A frame of `tool` at `angle_deg` with no noise, shading, clutter or rim.
+    fn plain(tool: ToolGeometry, entry: Entry, angle_deg: f64, apex_px: [f64; 2]) -> FrameSpec {
+        let mut spec = FrameSpec::new(Style::Clean, angle_deg, 5);
+        spec.tool = Some(tool);
+        spec.entry = entry;
+        spec.base_deg = -12.0;
+        spec.apex_px = apex_px;
+        spec.look.noise_sigma = 0.0;
+        spec.look.shading = 0.0;
+        spec.look.probe_ramp = 0.0;
+        spec.look.outline = 0.0;
+        spec.look.particles = 0;
+        spec.look.substrate = None;
+        spec
+    }
+
+    fn tools() -> impl Iterator<Item = ToolGeometry> {
+        ToolKind::ALL.into_iter().flat_map(|kind| {
+            std::iter::once(ToolGeometry::typical(kind))
+                .chain((0..4).map(move |seed| ToolGeometry::random(kind, seed)))
+        })
+    }
+
+    /// Where the lines through two segments cross.
+    fn crossing(a: &Segment, b: &Segment) -> [f64; 2] {
+        let (d, e) = (sub(a.to, a.from), sub(b.to, b.from));
+        let r = sub(b.from, a.from);
+        let t = (r[0] * e[1] - r[1] * e[0]) / (d[0] * e[1] - d[1] * e[0]);
+        add(a.from, scale(d, t))
+    }
+
+    #[test]
+    fn the_apex_is_where_the_apex_edges_meet() {
+        for tool in tools() {
+            for entry in [Entry::Left, Entry::Right] {
+                for angle in [-15.0, 0.0, 9.0] {
+                    let spec = plain(tool, entry, angle, [300.0, 250.0]);
+                    let truth = tool_truth(&spec).unwrap();
+                    let names: Vec<_> = truth.edges.iter().map(|(n, _)| *n).collect();
+                    assert_eq!(names, tool.kind.edge_names());
+                    let [a, b] = tool.kind.apex_edges().map(|n| truth.edge(n).unwrap());
+                    let p = crossing(&a, &b);
+                    let miss = (p[0] - 300.0).hypot(p[1] - 250.0);
+                    assert!(miss < 1e-6, "{tool:?} {entry:?} {angle}: {p:?}");
+                    assert_eq!(a.from, truth.apex_px);
+                    assert_eq!(b.from, truth.apex_px);
+                    let end = truth.edge("end").unwrap();
+                    assert!((end.length() - tool.end_um * spec.px_per_um()).abs() < 1e-9);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_truth_turns_rigidly_about_the_apex() {
+        for tool in tools() {
+            for entry in [Entry::Left, Entry::Right] {
+                let a0 = [320.0, 240.0];
+                let r = tool_truth(&plain(tool, entry, 0.0, a0)).unwrap();
+                for angle in [-15.0, -4.5, 12.0] {
+                    let a1 = [280.0, 300.0];
+                    let f = tool_truth(&plain(tool, entry, angle, a1)).unwrap();
+                    let moved = |p: [f64; 2]| add(a1, rotate(sub(p, a0), f64::to_radians(angle)));
+                    for ((name, s0), (_, s1)) in r.edges.iter().zip(&f.edges) {
+                        for (p0, p1) in [(s0.from, s1.from), (s0.to, s1.to)] {
+                            let q = moved(p0);
+                            let miss = (q[0] - p1[0]).hypot(q[1] - p1[1]);
+                            assert!(miss < 1e-9, "{tool:?} {entry:?} {angle} {name}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_blank_frame_has_no_truth_in_view() {
+        let mut spec = plain(
+            ToolGeometry::typical(ToolKind::Needle),
+            Entry::Left,
+            3.0,
+            [1.0; 2],
+        );
+        spec.blank = true;
+        let truth = tool_truth(&spec).unwrap();
+        assert!(!truth.in_view && truth.edges.is_empty());
+        assert!(truth.angle_deg.is_nan() && truth.apex_px[0].is_nan());
+        spec.tool = None;
+        assert!(tool_truth(&spec).is_none());
+    }
+
+    #[test]
+    fn clipping_keeps_the_part_in_the_frame() {
+        let s = Segment {
+            from: [10.0, 10.0],
+            to: [-90.0, 110.0],
+        };
+        let c = clip_to_frame(&s, 640, 480).unwrap();
+        assert_eq!(c.from, [10.0, 10.0]);
+        assert!((c.to[0] + 0.5).abs() < 1e-12 && (c.to[1] - 20.5).abs() < 1e-12);
+        let out = Segment {
+            from: [-5.0, 10.0],
+            to: [-5.0, 50.0],
+        };
+        assert!(clip_to_frame(&out, 640, 480).is_none());
+    }
+
+    /// The frame's level at the pixel nearest `p`.
+    fn level(frame: &image::GrayImage, p: [f64; 2]) -> f64 {
+        f64::from(frame.get_pixel(p[0].round() as u32, p[1].round() as u32)[0])
+    }
+
+    #[test]
+    fn the_tool_is_drawn_inside_its_true_edges_and_deterministically() {
+        // Inside and outside each edge, a few pixels off the middle of its visible part.
+        const OFF_PX: f64 = 4.0;
+        for tool in tools() {
+            for (entry, dark) in [(Entry::Left, false), (Entry::Right, true)] {
+                let mut spec = plain(tool, entry, 7.0, [330.0, 250.0]);
+                if dark {
+                    spec.look.background = 170.0;
+                    spec.look.probe = 90.0;
+                }
+                let mut frame = image::GrayImage::new(1, 1);
+                let truth = super::super::render_tool_into(&spec, &[], &mut frame);
+                let mut again = image::GrayImage::new(1, 1);
+                super::super::render_tool_into(&spec, &[], &mut again);
+                assert_eq!(frame, again);
+                // A point inside: the middle of the flanks' chords' four ends.
+                let ends: Vec<[f64; 2]> = truth.edges[..TOOL_FLANKS]
+                    .iter()
+                    .flat_map(|(_, s)| [s.from, s.to])
+                    .collect();
+                let inner = scale(ends.iter().fold([0.0; 2], |a, &p| add(a, p)), 0.25);
+                for (name, edge) in &truth.edges {
+                    let seen = clip_to_frame(edge, spec.width, spec.height).unwrap();
+                    let mid = scale(add(seen.from, seen.to), 0.5);
+                    let d = scale(sub(seen.to, seen.from), 1.0 / seen.length());
+                    let mut n = [-d[1], d[0]];
+                    if (inner[0] - mid[0]) * n[0] + (inner[1] - mid[1]) * n[1] < 0.0 {
+                        n = scale(n, -1.0);
+                    }
+                    let inside = level(&frame, add(mid, scale(n, OFF_PX)));
+                    let outside = level(&frame, add(mid, scale(n, -OFF_PX)));
+                    let contrast = if dark {
+                        outside - inside
+                    } else {
+                        inside - outside
+                    };
+                    assert!(contrast > 60.0, "{tool:?} {name}: {inside} vs {outside}");
+                }
+            }
+        }
+    }
+}
