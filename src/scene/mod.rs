@@ -17,7 +17,7 @@
 //!
 //! A spec's own probe may instead be a rigid tool without a cantilever (a needle, the
 //! end of a tipless cantilever, a gripper jaw: [`ToolGeometry`], named straight edges,
-//! truth from [`tool_truth`]).
+//! truth from [`tool_truth`]); [`tool_suite`] generates seeded sessions of them.
 //!
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of
@@ -34,6 +34,7 @@ pub mod rng;
 mod session;
 mod spec;
 mod tool;
+mod tool_suite;
 
 use std::cell::RefCell;
 
@@ -52,6 +53,7 @@ pub use tool::{
     clip_to_frame, tool_truth, Flank, ToolGeometry, ToolKind, ToolTruth, DEFAULT_SPAN_UM, MAX_BOW,
     TOOL_FLANKS,
 };
+pub use tool_suite::{tool_suite, ToolSession, CLICKS_PER_EDGE, TIP_MARGIN_PX, TIP_REGION};
 
 thread_local! {
     static RENDERER: RefCell<Renderer> = RefCell::new(Renderer::new());
