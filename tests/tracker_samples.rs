@@ -208,7 +208,7 @@ fn bad_calibration_input_is_named() {
     let clicks = s.config.probes[0].tracker.calibration.clone().unwrap();
     let cfg = &s.config.probes[0].tracker;
     let mut outside = clicks.clone();
-    outside.blue[1] = [700.0, 20.0];
+    outside.points_mut("blue").unwrap()[1] = [700.0, 20.0];
     let err = Calibration::from_reference(&s.reference, &outside, cfg).unwrap_err();
     assert!(
         matches!(
@@ -226,7 +226,7 @@ fn bad_calibration_input_is_named() {
     );
     // Clicks on the empty background: no edge there.
     let mut nowhere = clicks.clone();
-    nowhere.green = vec![[560.0, 300.0], [590.0, 330.0], [610.0, 350.0]];
+    *nowhere.points_mut("green").unwrap() = vec![[560.0, 300.0], [590.0, 330.0], [610.0, 350.0]];
     let err = Calibration::from_reference(&s.reference, &nowhere, cfg).unwrap_err();
     assert!(
         matches!(
@@ -240,7 +240,9 @@ fn bad_calibration_input_is_named() {
     );
     // Blue and green swapped: the faces do not enclose a bright pyramid.
     let mut swapped = clicks.clone();
-    std::mem::swap(&mut swapped.blue, &mut swapped.green);
+    let blue = swapped.points("blue").unwrap().to_vec();
+    let green = std::mem::replace(swapped.points_mut("green").unwrap(), blue);
+    *swapped.points_mut("blue").unwrap() = green;
     let err = Calibration::from_reference(&s.reference, &swapped, cfg).unwrap_err();
     assert!(matches!(err, VisionError::Degenerate(_)), "{err}");
     // The same clicks on a blank image.

@@ -128,19 +128,15 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         let (found, calibration) = auto_calibrate(&reference, apex, &tracker)
             .with_context(|| format!("calibrating on {}", args.image.display()))?;
         let mut clicks = found.config(args.image.clone());
-        for points in [&mut clicks.red, &mut clicks.blue, &mut clicks.green] {
+        for (_, points) in clicks.edges.iter_mut() {
             for p in points.iter_mut() {
                 *p = origin.output(*p);
             }
         }
         (clicks, calibration)
     } else {
-        let clicks = CalibrationConfig {
-            reference_image: args.image.clone(),
-            red: args.red,
-            blue: args.blue,
-            green: args.green,
-        };
+        let clicks =
+            CalibrationConfig::pyramid(args.image.clone(), args.red, args.blue, args.green);
         let clicked = clicks.clone().counted_from(origin);
         let calibration = Calibration::from_reference(&reference, &clicked, &tracker)
             .with_context(|| format!("calibrating on {}", args.image.display()))?;
@@ -169,13 +165,11 @@ pub fn calibration_block(
         || clicks.reference_image.display().to_string(),
         |n| n.to_string_lossy().to_string(),
     );
-    let mut out = format!(
-        "[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n\
-         red = {}\nblue = {}\ngreen = {}\n",
-        points(&clicks.red),
-        points(&clicks.blue),
-        points(&clicks.green)
-    );
+    let mut out =
+        format!("[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n");
+    for (edge, clicked) in &clicks.edges {
+        out.push_str(&format!("{edge} = {}\n", points(clicked)));
+    }
     out.push_str(
         "# Refined on the reference image (degrees, CCW on screen, +- the standard error\n\
          # from the reference's noise); from the clicks alone:\n",

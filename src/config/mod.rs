@@ -193,7 +193,7 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         assert_eq!(cfg.probes[0].tracker.threshold, Threshold::Otsu);
         let cal = cfg.probes[0].tracker.calibration.clone().unwrap();
         assert_eq!(cal.reference_image, Path::new("/data/s/reference.png"));
-        assert_eq!(cal.green.len(), 3);
+        assert_eq!(cal.points("green").map(<[_]>::len), Some(3));
     }
 
     #[test]
@@ -236,8 +236,8 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
         assert_eq!(cfg.probes[0].tracker.edge_bias_px, 0.3);
         // Clicks counted from the corner are kept counted from the pixel centre.
         let cal = cfg.probes[0].tracker.calibration.clone().unwrap();
-        assert_eq!(cal.red[0], [156.3, 32.9]);
-        assert_eq!(cal.green[2], [314.3, 142.4]);
+        assert_eq!(cal.points("red").unwrap()[0], [156.3, 32.9]);
+        assert_eq!(cal.points("green").unwrap()[2], [314.3, 142.4]);
         assert_eq!(PixelOrigin::Corner.output([1.0, 2.0]), [1.5, 2.5]);
         assert_eq!(PixelOrigin::Centre.output([1.0, 2.0]), [1.0, 2.0]);
         assert_eq!(PixelOrigin::parse("center"), Some(PixelOrigin::Centre));
@@ -418,6 +418,65 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
             msg.contains("tracker.calibration.red") && msg.contains("1 point"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn any_probe_names_its_edges_and_its_apex() {
+        let needle =
+            "[tracker.calibration]\nreference_image = \"r.png\"\napex = [\"upper\", \"end\"]\n\
+                      [tracker.calibration.edges]\n\
+                      upper = [[120.0, 210.5], [260.0, 236.0], [400.0, 261.5]]\n\
+                      lower = [[120.0, 420.0], [260.0, 389.5]]\n\
+                      end = [[505.0, 280.0], [507.5, 310.0], [510.0, 340.0]]\n";
+        let cfg = parse(needle).unwrap();
+        assert!(cfg.probes[0].cantilever.is_none());
+        let cal = cfg.probes[0].tracker.calibration.clone().unwrap();
+        let names: Vec<&str> = cal.edges.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["upper", "lower", "end"], "the file's order");
+        assert_eq!(cal.apex, Some(["upper".to_string(), "end".to_string()]));
+        assert_eq!(cal.points("lower").unwrap()[1], [260.0, 389.5]);
+        assert!(cal.pyramid_points().is_none());
+        // The pyramid's names without an apex are its shorthand, in its order.
+        let pyramid = parse(
+            "[tracker.calibration]\nreference_image = \"r.png\"\n[tracker.calibration.edges]\n\
+             green = [[0.0, 0.0], [9.0, 9.0]]\nred = [[0.0, 5.0], [9.0, 5.0]]\n\
+             blue = [[0.0, 9.0], [9.0, 0.0]]\n",
+        )
+        .unwrap();
+        let cal = pyramid.probes[0].tracker.calibration.clone().unwrap();
+        assert_eq!(cal.pyramid_points().unwrap()[0], [[0.0, 5.0], [9.0, 5.0]]);
+        for (text, expect) in [
+            (
+                needle.replace("apex = [\"upper\", \"end\"]\n", ""),
+                "missing tracker.calibration.apex",
+            ),
+            (
+                needle.replace("\"end\"]", "\"tip\"]"),
+                "names \"tip\", which is not one of the edges",
+            ),
+            (
+                needle.replace("\"end\"]", "\"upper\"]"),
+                "two different edges",
+            ),
+            (
+                needle.replace("apex = ", "red = [[0.0, 0.0], [9.0, 9.0]]\napex = "),
+                "either as red, blue and green or in [tracker.calibration.edges]",
+            ),
+            (
+                needle.replace(
+                    "lower = [[120.0, 420.0], [260.0, 389.5]]",
+                    "lower = [[120.0, 420.0]]",
+                ),
+                "tracker.calibration.edges.lower",
+            ),
+            (
+                needle.replace("end = ", "\"an end\" = "),
+                "edge names are 1 to",
+            ),
+        ] {
+            let msg = error_of(&text);
+            assert!(msg.contains(expect), "{expect}: {msg}");
+        }
     }
 
     #[test]

@@ -12,7 +12,8 @@ use crate::hw::config::RawDevice;
 use crate::model::Cantilever;
 use crate::sim::config::{RawSimProbe, SimProbe};
 use crate::vision::{
-    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
+    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGES,
+    MAX_EDGE_BIAS_PX, PYRAMID_EDGES,
 };
 pub use crate::vision::{MAX_PROBES, SINGLE_NAME};
 
@@ -92,10 +93,14 @@ pub(super) struct RawTracker {
 struct RawCalibration {
     reference_image: String,
     /// Each click `[x, y]`; read as a list so that a third coordinate is refused
-    /// rather than silently dropped.
-    red: Vec<Vec<f64>>,
-    blue: Vec<Vec<f64>>,
-    green: Vec<Vec<f64>>,
+    /// rather than silently dropped. The AFM pyramid's shorthand.
+    red: Option<Vec<Vec<f64>>>,
+    blue: Option<Vec<Vec<f64>>>,
+    green: Option<Vec<Vec<f64>>>,
+    /// Any probe: `[tracker.calibration.edges]`, name = clicks, in the file's order,
+    /// and the two edges meeting at the tip point.
+    edges: Option<toml::Table>,
+    apex: Option<Vec<String>>,
 }
 
 /// One `[[probe]]` entry.
@@ -406,17 +411,156 @@ impl Section<'_> {
                 "must name an image file",
             ));
         }
-        let red = self.clicks("red", raw.red)?;
-        let blue = self.clicks("blue", raw.blue)?;
-        let green = self.clicks("green", raw.green)?;
         let base = self.check.file.parent().unwrap_or(Path::new(""));
-        Ok(CalibrationConfig {
-            reference_image: base.join(raw.reference_image),
-            red,
-            blue,
-            green,
+        let reference_image = base.join(raw.reference_image);
+        let section = self.key("tracker.calibration");
+        let shorthand = [raw.red, raw.blue, raw.green];
+        let config = match raw.edges {
+            None => {
+                if raw.apex.is_some() {
+                    return Err(self.check.inconsistent(format!(
+                        "{section}.apex names the edges of [{section}.edges], which is not \
+                         given (the pyramid's red, blue and green need no apex)"
+                    )));
+                }
+                let [red, blue, green] = match shorthand {
+                    [Some(r), Some(b), Some(g)] => [r, b, g],
+                    missing => {
+                        let name = PYRAMID_EDGES
+                            .iter()
+                            .zip(&missing)
+                            .find(|(_, m)| m.is_none())
+                            .map_or("red", |(n, _)| n);
+                        return Err(self.check.inconsistent(format!(
+                            "missing {section}.{name}: give the AFM pyramid's red, blue and \
+                             green clicks, or name any probe's edges in [{section}.edges] \
+                             with its apex"
+                        )));
+                    }
+                };
+                CalibrationConfig::pyramid(
+                    reference_image,
+                    self.clicks("red", red)?,
+                    self.clicks("blue", blue)?,
+                    self.clicks("green", green)?,
+                )
+            }
+            Some(table) => {
+                if shorthand.iter().any(Option::is_some) {
+                    return Err(self.check.inconsistent(format!(
+                        "{section}: give the edges either as red, blue and green or in \
+                         [{section}.edges], not both"
+                    )));
+                }
+                self.named_edges(reference_image, table, raw.apex)?
+            }
+        };
+        Ok(config.counted_from(origin))
+    }
+
+    /// `[tracker.calibration.edges]` and `apex`: two to [`MAX_EDGES`] edges, each
+    /// named and clicked, and the two of them meeting at the tip point. Edges named
+    /// red, blue and green without an apex are the AFM pyramid's.
+    fn named_edges(
+        &self,
+        reference_image: std::path::PathBuf,
+        table: toml::Table,
+        apex: Option<Vec<String>>,
+    ) -> Result<CalibrationConfig, ConfigError> {
+        let key = self.key("tracker.calibration.edges");
+        if !(2..=MAX_EDGES).contains(&table.len()) {
+            return Err(self.check.invalid(
+                &key,
+                format_args!("{} edge(s)", table.len()),
+                &format!("needs 2 to {MAX_EDGES} named edges"),
+            ));
         }
-        .counted_from(origin))
+        let mut edges = Vec::with_capacity(table.len());
+        for (name, value) in table {
+            let valid = !name.is_empty()
+                && name.len() <= MAX_NAME_CHARS
+                && name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+            if !valid {
+                return Err(self.check.invalid(
+                    &key,
+                    format_args!("{name:?}"),
+                    &format!(
+                        "edge names are 1 to {MAX_NAME_CHARS} letters, digits, '_' or '-' \
+                         (they name refusals: edge-missing-<name>)"
+                    ),
+                ));
+            }
+            let raw: Vec<Vec<f64>> = value.try_into().map_err(|_| {
+                self.check.invalid(
+                    &format!("{key}.{name}"),
+                    "this value",
+                    "must be a list of clicked pixels [[x, y], ...]",
+                )
+            })?;
+            let points = self.clicks(&format!("edges.{name}"), raw)?;
+            edges.push((name, points));
+        }
+        let names: Vec<&str> = edges.iter().map(|(n, _)| n.as_str()).collect();
+        let pyramid =
+            names.len() == PYRAMID_EDGES.len() && PYRAMID_EDGES.iter().all(|n| names.contains(n));
+        let apex_key = self.key("tracker.calibration.apex");
+        let apex = match apex {
+            None if pyramid => None,
+            None => {
+                return Err(self.check.inconsistent(format!(
+                    "missing {apex_key}: name the two edges of [{key}] that meet at the \
+                     probe's tip point, e.g. apex = [\"{}\", \"{}\"]",
+                    names[0], names[1]
+                )))
+            }
+            Some(apex) => {
+                let pair: [String; 2] = apex.clone().try_into().map_err(|_| {
+                    self.check
+                        .invalid(&apex_key, format_args!("{apex:?}"), "must name two edges")
+                })?;
+                if let Some(unknown) = pair.iter().find(|a| !names.contains(&a.as_str())) {
+                    return Err(self.check.invalid(
+                        &apex_key,
+                        format_args!("{apex:?}"),
+                        &format!(
+                            "names {unknown:?}, which is not one of the edges ({})",
+                            names.join(", ")
+                        ),
+                    ));
+                }
+                if pair[0] == pair[1] {
+                    return Err(self.check.invalid(
+                        &apex_key,
+                        format_args!("{apex:?}"),
+                        "must name two different edges",
+                    ));
+                }
+                Some(pair)
+            }
+        };
+        if pyramid && apex.is_none() {
+            // The shorthand, in the pyramid's order.
+            let take = |n: &str| {
+                edges
+                    .iter()
+                    .find(|(e, _)| e == n)
+                    .map(|(_, p)| p.clone())
+                    .unwrap_or_default()
+            };
+            return Ok(CalibrationConfig::pyramid(
+                reference_image,
+                take("red"),
+                take("blue"),
+                take("green"),
+            ));
+        }
+        Ok(CalibrationConfig {
+            reference_image,
+            edges,
+            apex,
+        })
     }
 
     /// The clicks on one edge: two or more pixels `[x, y]`, at least 2 px apart.

@@ -121,12 +121,12 @@ impl Session {
     /// The `[tracker.calibration]` of probe `k`: the reference and its clicks.
     fn calibration_of(&self, k: usize) -> CalibrationConfig {
         let clicks = self.clicks_of(k);
-        CalibrationConfig {
-            reference_image: "reference.png".into(),
-            red: clicks.red,
-            blue: clicks.blue,
-            green: clicks.green,
-        }
+        CalibrationConfig::pyramid(
+            "reference.png".into(),
+            clicks.red,
+            clicks.blue,
+            clicks.green,
+        )
     }
 
     /// A tracker for each probe of the reference, in order, calibrated on the rendered

@@ -370,13 +370,13 @@ mod tests {
             Miss::LowConfidence,
         ];
         for e in Edge::ALL {
-            misses.extend([Miss::EdgeMissing(e), Miss::WrongAppearance(e)]);
+            misses.extend([Miss::EdgeMissing(e.into()), Miss::WrongAppearance(e.into())]);
         }
         let names: std::collections::BTreeSet<&str> =
             misses.iter().map(|&m| miss_name(Some(m))).collect();
         assert_eq!(names.len(), misses.len(), "{names:?}");
         assert_eq!(
-            miss_name(Some(Miss::EdgeMissing(Edge::Green))),
+            miss_name(Some(Miss::EdgeMissing(Edge::Green.into()))),
             "edge-missing-green"
         );
         assert_eq!(

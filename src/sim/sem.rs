@@ -250,12 +250,12 @@ impl SemScene {
         let clicks = (0..self.probes.len())
             .map(|k| {
                 let clicks = session.clicks_of(k);
-                CalibrationConfig {
-                    reference_image: "<simulated SEM reference frame>".into(),
-                    red: clicks.red,
-                    blue: clicks.blue,
-                    green: clicks.green,
-                }
+                CalibrationConfig::pyramid(
+                    "<simulated SEM reference frame>".into(),
+                    clicks.red,
+                    clicks.blue,
+                    clicks.green,
+                )
             })
             .collect();
         (image, clicks)

@@ -98,12 +98,12 @@ pub struct AutoClicks {
 impl AutoClicks {
     /// The clicks as `[tracker.calibration]` holds them.
     pub fn config(&self, reference_image: std::path::PathBuf) -> CalibrationConfig {
-        CalibrationConfig {
+        CalibrationConfig::pyramid(
             reference_image,
-            red: self.red.clone(),
-            blue: self.blue.clone(),
-            green: self.green.clone(),
-        }
+            self.red.clone(),
+            self.blue.clone(),
+            self.green.clone(),
+        )
     }
 }
 

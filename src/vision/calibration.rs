@@ -96,15 +96,19 @@ impl Calibration {
                 height: h,
             });
         }
-        let points = [&clicks.red, &clicks.blue, &clicks.green];
+        let Some(points) = clicks.pyramid_points() else {
+            return Err(VisionError::Degenerate(
+                "the clicks name edges other than the pyramid's red, blue and green".into(),
+            ));
+        };
         for (edge, pts) in Edge::ALL.iter().zip(points) {
             check_clicks(*edge, pts, w, h)?;
         }
         let clicked = click_lines(points)?;
         let polarity: [f64; 3] = [
-            side_polarity(Edge::Red, &clicked[RED], &clicks.red, reference)?,
-            side_polarity(Edge::Blue, &clicked[BLUE], &clicks.blue, reference)?,
-            side_polarity(Edge::Green, &clicked[GREEN], &clicks.green, reference)?,
+            side_polarity(Edge::Red, &clicked[RED], points[RED], reference)?,
+            side_polarity(Edge::Blue, &clicked[BLUE], points[BLUE], reference)?,
+            side_polarity(Edge::Green, &clicked[GREEN], points[GREEN], reference)?,
         ];
         let mut pyr = Pyramid::default();
         pyr.build(reference);
@@ -576,7 +580,7 @@ fn locate(
 /// towards the green clicks and green's towards the blue ones (the pyramid lies between
 /// its faces), red's towards the apex where the clicked faces meet (the pyramid hangs
 /// below the beam's upper face).
-fn click_lines(points: [&Vec<[f64; 2]>; 3]) -> Result<[Line; 3], VisionError> {
+fn click_lines(points: [&[[f64; 2]]; 3]) -> Result<[Line; 3], VisionError> {
     let centroid = |pts: &[[f64; 2]]| {
         let n = pts.len() as f64;
         [

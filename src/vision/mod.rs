@@ -44,6 +44,7 @@ mod overlay;
 mod probes;
 mod pyramid;
 mod refine;
+mod rigid;
 mod sigma;
 mod simd;
 mod stations;
@@ -58,10 +59,15 @@ pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
 pub use options::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
+    PYRAMID_EDGES,
 };
 pub use overlay::{draw_calibration, draw_overlay, draw_overlays};
 pub use probes::{
     refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES, SINGLE_NAME,
+};
+pub use rigid::{
+    calibrate as calibrate_rigid, Pose as RigidPose, RigidEdge, RigidError, RigidTemplate,
+    RigidTracker, MAX_EDGES,
 };
 pub use simd::set_avx2;
 pub use tracker::Tracker;
@@ -104,6 +110,70 @@ impl fmt::Display for Edge {
     }
 }
 
+/// An edge's name as refusals give it (`Miss::EdgeMissing`, `Miss::WrongAppearance`): a
+/// pyramid edge's (`red`, `blue`, `green`) or a rigid probe's named edge, with the
+/// `miss` column's spellings of both refusals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct EdgeName {
+    name: &'static str,
+    missing: &'static str,
+    appearance: &'static str,
+}
+
+/// Names given to [`EdgeName::intern`] so far: each distinct name is stored once, for
+/// the life of the process (a lab's configs name a handful).
+static NAMES: std::sync::Mutex<Vec<EdgeName>> = std::sync::Mutex::new(Vec::new());
+
+impl EdgeName {
+    /// The name of a rigid probe's edge.
+    pub fn intern(name: &str) -> EdgeName {
+        let mut names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(found) = names.iter().find(|n| n.name == name) {
+            return *found;
+        }
+        let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
+        let interned = EdgeName {
+            name: leak(name.to_string()),
+            missing: leak(format!("edge-missing-{name}")),
+            appearance: leak(format!("wrong-appearance-{name}")),
+        };
+        names.push(interned);
+        interned
+    }
+
+    pub fn as_str(self) -> &'static str {
+        self.name
+    }
+}
+
+impl From<Edge> for EdgeName {
+    fn from(edge: Edge) -> EdgeName {
+        match edge {
+            Edge::Red => EdgeName {
+                name: "red",
+                missing: "edge-missing-red",
+                appearance: "wrong-appearance-red",
+            },
+            Edge::Blue => EdgeName {
+                name: "blue",
+                missing: "edge-missing-blue",
+                appearance: "wrong-appearance-blue",
+            },
+            Edge::Green => EdgeName {
+                name: "green",
+                missing: "edge-missing-green",
+                appearance: "wrong-appearance-green",
+            },
+        }
+    }
+}
+
+impl fmt::Display for EdgeName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name)
+    }
+}
+
 /// One tip edge as found in a frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeFit {
@@ -131,10 +201,10 @@ pub enum Miss {
     RotationOutside,
     /// An edge the pose puts in view is not there along its predicted length (or not
     /// at its corner: the tip hidden).
-    EdgeMissing(Edge),
+    EdgeMissing(EdgeName),
     /// An edge in view steps the wrong way (the probe's calibrated polarity), with a
     /// contrast unlike the calibrated one, or bounds a body unlike the probe's.
-    WrongAppearance(Edge),
+    WrongAppearance(EdgeName),
     /// The edges do not end where the calibrated geometry at this scale puts them: a
     /// face running short or on, or the beam's lower face not at its calibrated
     /// thickness.
@@ -153,18 +223,13 @@ pub enum Miss {
 impl Miss {
     /// The name written in result files (`miss` column).
     pub fn name(self) -> &'static str {
-        use Edge::{Blue, Green, Red};
         match self {
             Miss::NoCandidates => "no-candidates",
             Miss::Inconsistent => "inconsistent",
             Miss::ApexOutside => "apex-outside",
             Miss::RotationOutside => "rotation-outside-window",
-            Miss::EdgeMissing(Red) => "edge-missing-red",
-            Miss::EdgeMissing(Blue) => "edge-missing-blue",
-            Miss::EdgeMissing(Green) => "edge-missing-green",
-            Miss::WrongAppearance(Red) => "wrong-appearance-red",
-            Miss::WrongAppearance(Blue) => "wrong-appearance-blue",
-            Miss::WrongAppearance(Green) => "wrong-appearance-green",
+            Miss::EdgeMissing(edge) => edge.missing,
+            Miss::WrongAppearance(edge) => edge.appearance,
             Miss::ScaleMismatch => "scale-mismatch",
             Miss::LowConfidence => "low-confidence",
             Miss::OtherProbe => "other-probe",

@@ -109,21 +109,70 @@ impl Default for TrackerConfig {
 }
 
 /// Validated `[tracker.calibration]`: the reference frame and the pixels a person
-/// clicked on each tip edge (x right, y down, origin at the top-left pixel's centre:
-/// clicks given from the corner are converted on reading).
+/// clicked on each named edge (x right, y down, origin at the top-left pixel's centre:
+/// clicks given from the corner are converted on reading). The AFM pyramid's edges are
+/// `red`, `blue` and `green` with no `apex` (its tip is where blue meets green); any
+/// other probe names its edges and the two that meet at its tip point.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CalibrationConfig {
     /// Resolved against the config file's directory.
     pub reference_image: PathBuf,
-    pub red: Vec<[f64; 2]>,
-    pub blue: Vec<[f64; 2]>,
-    pub green: Vec<[f64; 2]>,
+    /// Each edge's name and clicked pixels, in the file's order.
+    pub edges: Vec<(String, Vec<[f64; 2]>)>,
+    /// The two edges meeting at the tip point; none for the AFM pyramid.
+    pub apex: Option<[String; 2]>,
 }
 
+/// The AFM pyramid's edge names, in [`crate::vision::Edge`] order.
+pub const PYRAMID_EDGES: [&str; 3] = ["red", "blue", "green"];
+
 impl CalibrationConfig {
+    /// The AFM pyramid's clicks.
+    pub fn pyramid(
+        reference_image: PathBuf,
+        red: Vec<[f64; 2]>,
+        blue: Vec<[f64; 2]>,
+        green: Vec<[f64; 2]>,
+    ) -> CalibrationConfig {
+        CalibrationConfig {
+            reference_image,
+            edges: PYRAMID_EDGES
+                .iter()
+                .map(|n| n.to_string())
+                .zip([red, blue, green])
+                .collect(),
+            apex: None,
+        }
+    }
+
+    /// The clicks on edge `name`.
+    pub fn points(&self, name: &str) -> Option<&[[f64; 2]]> {
+        self.edges
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.as_slice())
+    }
+
+    /// The clicks on edge `name`, to change them.
+    pub fn points_mut(&mut self, name: &str) -> Option<&mut Vec<[f64; 2]>> {
+        self.edges
+            .iter_mut()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p)
+    }
+
+    /// The red, blue and green clicks when these are the AFM pyramid's.
+    pub fn pyramid_points(&self) -> Option<[&[[f64; 2]]; 3]> {
+        if self.apex.is_some() || self.edges.len() != PYRAMID_EDGES.len() {
+            return None;
+        }
+        let [r, b, g] = PYRAMID_EDGES.map(|n| self.points(n));
+        Some([r?, b?, g?])
+    }
+
     /// Clicks given from `origin`, brought to count from the pixel centre.
     pub fn counted_from(mut self, origin: PixelOrigin) -> CalibrationConfig {
-        for points in [&mut self.red, &mut self.blue, &mut self.green] {
+        for (_, points) in self.edges.iter_mut() {
             for p in points.iter_mut() {
                 *p = origin.input(*p);
             }

@@ -186,11 +186,11 @@ impl Profile {
     pub fn refusal(&self, edge: Edge) -> Option<Miss> {
         let n = self.stations;
         if n < STATIONS {
-            return Some(Miss::EdgeMissing(edge));
+            return Some(Miss::EdgeMissing(edge.into()));
         }
         let ratio = self.step_ratio();
         if ratio <= -HOLD_RATIO {
-            return Some(Miss::WrongAppearance(edge));
+            return Some(Miss::WrongAppearance(edge.into()));
         }
         let probe_level = self.held_level();
         let missing = |range: std::ops::Range<usize>| {
@@ -204,7 +204,7 @@ impl Profile {
                 && !self.corner_held()
                 && !self.corner_inside_probe())
         {
-            return Some(Miss::EdgeMissing(edge));
+            return Some(Miss::EdgeMissing(edge.into()));
         }
         if edge != Edge::Red && missing(n - FAR_MISSING..n) == FAR_MISSING {
             return Some(Miss::ScaleMismatch);
@@ -435,7 +435,7 @@ pub fn check_edges(
                 }
             }
             if p.step_ratio() <= -HOLD_RATIO {
-                return Some(Miss::WrongAppearance(Edge::Red));
+                return Some(Miss::WrongAppearance(Edge::Red.into()));
             }
             // Found along its length, not necessarily at its corner: a beam edge the
             // fit could not use is faint, and its corner the first to fade.
@@ -458,7 +458,7 @@ pub fn check_edges(
             corners += 1;
             hidden += usize::from(!held);
             if !held && !p.corner_inside_probe() {
-                return Some(Miss::EdgeMissing(Edge::ALL[e]));
+                return Some(Miss::EdgeMissing(Edge::ALL[e].into()));
             }
         }
         let level = p.inside_level();
@@ -467,10 +467,10 @@ pub fn check_edges(
     // The tip is hidden when no face shows it at the apex; one face may lose its
     // corner to a particle or a bright substrate beside it while the other holds.
     if corners > 0 && hidden == corners {
-        return Some(Miss::EdgeMissing(Edge::Blue));
+        return Some(Miss::EdgeMissing(Edge::Blue.into()));
     }
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
-        return Some(Miss::WrongAppearance(Edge::Red));
+        return Some(Miss::WrongAppearance(Edge::Red.into()));
     }
     if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, fitted) {
         return Some(miss);
@@ -484,7 +484,7 @@ pub fn check_edges(
     for (e, face) in faces.iter().enumerate() {
         if let Some((span, p, partner)) = face {
             if turned_face(frame, &t.line(pose, e), *span, partner.as_ref(), &s, p) {
-                return Some(Miss::EdgeMissing(Edge::ALL[e]));
+                return Some(Miss::EdgeMissing(Edge::ALL[e].into()));
             }
         }
     }

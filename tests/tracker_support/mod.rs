@@ -263,12 +263,12 @@ pub mod rendered {
         TrackerConfig {
             threshold: session.threshold,
             window_deg: session.window_deg,
-            calibration: Some(CalibrationConfig {
-                reference_image: "reference.png".into(),
-                red: fix(clicks.red, edges.red, 1),
-                blue: fix(clicks.blue, edges.blue, 2),
-                green: fix(clicks.green, edges.green, 3),
-            }),
+            calibration: Some(CalibrationConfig::pyramid(
+                "reference.png".into(),
+                fix(clicks.red, edges.red, 1),
+                fix(clicks.blue, edges.blue, 2),
+                fix(clicks.green, edges.green, 3),
+            )),
             ..TrackerConfig::default()
         }
     }

@@ -37,7 +37,7 @@ pub enum DaqBackend {
 #[serde(tag = "backend", rename_all = "lowercase")]
 enum RawDaq {
     Sim(NoKeys),
-    Comedi(RawComedi),
+    Comedi(Box<RawComedi>),
 }
 
 #[derive(Debug, Deserialize)]

@@ -1,0 +1,418 @@
+//! The fit of a rigid probe's pose on the full-resolution grey levels, and its
+//! verification.
+//!
+//! Stations along every edge of the template, placed by the current pose, locate the
+//! edge's step within a reach that shrinks pass by pass (8, 4, 2.5, 2 px); the pose
+//! (rotation, apex, scale) is then solved by Gauss-Newton on the points' distances to
+//! their edges' lines, with Huber weights. The rotation's standard error is the
+//! solution's covariance from the weighted residuals, times a factor measured on the
+//! rendered suites, combined with the reference's own.
+//!
+//! Verification then asks of the last pass's stations what `super` promises: every
+//! edge in view holds its calibrated step at [`HELD_SHARE`] of its stations and at the
+//! apex, its median step has the calibrated sign and about the calibrated size, no
+//! edge runs on past an end where the reference shows it ending, and the apex,
+//! rotation and scale lie in range.
+
+use image::GrayImage;
+use nalgebra::{Matrix4, Vector4};
+
+use super::search::SCALES;
+use super::station::Stations;
+use super::{Pose, RigidTemplate};
+use crate::vision::geometry::{dot, rotate, sub};
+use crate::vision::{EdgeName, Miss};
+
+/// Most edges a rigid template may have.
+pub const MAX_EDGES: usize = 8;
+/// Reach of the passes, frame pixels.
+const REACHES: [f64; 4] = [8.0, 4.0, 2.5, 2.0];
+/// Gauss-Newton steps per pass.
+const STEPS_PER_PASS: usize = 2;
+/// Station spacing along an edge, frame pixels, and the most stations per edge.
+const SPACING_PX: f64 = 5.0;
+const MAX_STATIONS: usize = 48;
+/// Stations keep this far from an edge's closed ends, frame pixels (the blurred
+/// corner belongs to both edges).
+const CORNER_PX: f64 = 3.0;
+/// A station enters the fit when it steps by this share of the calibrated step.
+const FIT_SHARE: f64 = 0.2;
+/// A station holds the edge when it steps by this share of the calibrated step within
+/// this distance of the fitted line.
+const HOLD_SHARE: f64 = 0.2;
+const HELD_PX: f64 = 1.5;
+/// A station past a closed end shows the edge running on when it steps by this share
+/// of the calibrated step within [`HELD_PX`] of the line.
+const RUN_ON_SHARE: f64 = 0.7;
+/// Share of an edge's stations in view that must hold it.
+pub const HELD_SHARE: f64 = 0.7;
+/// After the second pass, a placement whose stations hold less than this share in all
+/// is abandoned.
+const ABANDON_SHARE: f64 = 0.4;
+/// An edge is in view when at least this many of its stations are, and this share.
+const MIN_IN_VIEW: usize = 3;
+const IN_VIEW_SHARE: f64 = 0.25;
+/// The median step of an edge is at least this share of its calibrated step (with its
+/// sign). A larger step is no sign of another body: over a textured background the
+/// level outside the probe changes as it moves.
+const MIN_STEP_RATIO: f64 = 0.3;
+/// Stations checked beyond a closed end, at these distances past it, frame pixels;
+/// more than one holding means the edge runs on.
+const BEYOND_PX: [f64; 3] = [4.0, 8.0, 12.0];
+/// Floor of the residuals' scale in the Huber weights, pixels.
+const MIN_SCALE_PX: f64 = 0.2;
+/// Huber's constant, in units of the residuals' robust scale.
+const HUBER_K: f64 = 1.5;
+/// Ratio of the measured rotation error to the fit's covariance: neighbouring
+/// stations' runs overlap and the blur correlates them (measured on the rendered
+/// suites, tests/rigid_probes.rs).
+const SIGMA_FACTOR: f64 = 1.2;
+/// Apex stations: the stations nearest the apex on each apex edge that must hold.
+const APEX_STATIONS: usize = 2;
+
+/// One edge as a fit saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seen {
+    /// Positions along the edge (reference pixels) of its first and last station in
+    /// view.
+    pub span: [f64; 2],
+    pub held: usize,
+    pub stations: usize,
+    /// Median step of its stations, grey levels.
+    pub step: f64,
+}
+
+/// A verified fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    pub pose: Pose,
+    pub angle_sigma_rad: f64,
+    /// The least share of held stations over the edges in view.
+    pub confidence: f64,
+    pub edges: [Option<Seen>; MAX_EDGES],
+}
+
+/// A station's reading.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    edge: usize,
+    tau: f64,
+    /// The located step's point, frame pixels.
+    at: [f64; 2],
+    step: f64,
+    /// The step was found (inside the frame); else the station is out of view.
+    in_view: bool,
+}
+
+/// Fits poses; keeps its buffers between calls.
+#[derive(Debug, Default)]
+pub struct Fitter {
+    stations: Stations,
+    points: Vec<Point>,
+    residuals: Vec<f64>,
+}
+
+impl Fitter {
+    /// The verified fit of `template` from `start`, or the refusal and how much of the
+    /// probe the frame showed.
+    pub fn fit(
+        &mut self,
+        frame: &GrayImage,
+        template: &RigidTemplate,
+        start: Pose,
+        window_rad: f64,
+    ) -> Result<Fit, (Miss, f64)> {
+        let mut pose = start;
+        let mut covariance = Matrix4::zeros();
+        for (pass, &reach) in REACHES.iter().enumerate() {
+            self.read(frame, template, &pose, reach, false);
+            if pass == 1 {
+                let (held, total) = self.held();
+                if total == 0 || (held as f64) < ABANDON_SHARE * total as f64 {
+                    return Err((Miss::Inconsistent, held as f64 / total.max(1) as f64));
+                }
+            }
+            for _ in 0..STEPS_PER_PASS {
+                let Some((next, cov)) = self.solve(template, &pose) else {
+                    return Err((Miss::Inconsistent, 0.0));
+                };
+                pose = next;
+                covariance = cov;
+            }
+            if !(SCALES.0..=SCALES.1).contains(&pose.scale) {
+                return Err((Miss::ScaleMismatch, 0.0));
+            }
+        }
+        self.read(frame, template, &pose, REACHES[REACHES.len() - 1], true);
+        let sigma =
+            (covariance[(0, 0)].max(0.0).sqrt() * SIGMA_FACTOR).hypot(template.angle_sigma_rad);
+        self.verify(frame, template, pose, sigma, window_rad)
+    }
+
+    /// Reads every edge's stations at `pose`; with `beyond`, also the stations past
+    /// each closed end (edge index offset by [`MAX_EDGES`]).
+    fn read(
+        &mut self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: &Pose,
+        reach: f64,
+        beyond: bool,
+    ) {
+        self.points.clear();
+        for (e, edge) in t.edges.iter().enumerate() {
+            let normal = rotate(edge.normal, pose.psi);
+            let margin = CORNER_PX / pose.scale;
+            let lo = edge.extent[0] + if edge.open[0] { 0.0 } else { margin };
+            let hi = edge.extent[1] - if edge.open[1] { 0.0 } else { margin };
+            if hi <= lo {
+                continue;
+            }
+            let count = (((hi - lo) * pose.scale / SPACING_PX).floor() as usize + 1)
+                .clamp(MIN_IN_VIEW, MAX_STATIONS);
+            for k in 0..count {
+                let tau = lo + (hi - lo) * k as f64 / (count - 1) as f64;
+                let q = pose.place(edge, tau);
+                let found = self.stations.locate(frame, q, normal, edge.polarity, reach);
+                self.points.push(match found {
+                    Some(f) => Point {
+                        edge: e,
+                        tau,
+                        at: [q[0] + normal[0] * f.t, q[1] + normal[1] * f.t],
+                        step: f.step / edge.step,
+                        in_view: true,
+                    },
+                    None => Point {
+                        edge: e,
+                        tau,
+                        at: q,
+                        step: 0.0,
+                        in_view: false,
+                    },
+                });
+            }
+            if !beyond {
+                continue;
+            }
+            for (end, sign) in [(0, -1.0), (1, 1.0)] {
+                if edge.open[end] {
+                    continue;
+                }
+                for d in BEYOND_PX {
+                    let tau = edge.extent[end] + sign * d / pose.scale;
+                    let q = pose.place(edge, tau);
+                    if let Some(f) = self.stations.locate(frame, q, normal, edge.polarity, reach) {
+                        self.points.push(Point {
+                            edge: MAX_EDGES + e,
+                            tau,
+                            at: [q[0] + normal[0] * f.t, q[1] + normal[1] * f.t],
+                            step: f.step / edge.step,
+                            in_view: true,
+                        });
+                    }
+                }
+            }
+        }
+    }
+
+    /// Signed distance of a station's point from its edge's line at `pose`.
+    fn residual(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
+        let edge = &t.edges[p.edge % MAX_EDGES];
+        let normal = rotate(edge.normal, pose.psi);
+        dot(normal, sub(p.at, pose.apex)) - pose.scale * (edge.offset + edge.bow_at(p.tau))
+    }
+
+    /// Stations stepping as their edge does (before the fit has converged: wherever
+    /// within the reach), and stations in view.
+    fn held(&self) -> (usize, usize) {
+        let in_view = self.points.iter().filter(|p| p.in_view);
+        let held = in_view.clone().filter(|p| p.step >= HOLD_SHARE).count();
+        (held, in_view.count())
+    }
+
+    /// One Gauss-Newton step with Huber weights; the new pose and the covariance of the
+    /// parameters (psi, apex x, apex y, scale).
+    fn solve(&mut self, t: &RigidTemplate, pose: &Pose) -> Option<(Pose, Matrix4<f64>)> {
+        self.residuals.clear();
+        for p in &self.points {
+            if p.in_view && p.step >= FIT_SHARE {
+                self.residuals.push(Self::residual(t, pose, p).abs());
+            }
+        }
+        let n = self.residuals.len();
+        if n < 6 {
+            return None;
+        }
+        self.residuals.sort_by(f64::total_cmp);
+        let scale_px = (1.4826 * self.residuals[n / 2]).max(MIN_SCALE_PX);
+        let k = HUBER_K * scale_px;
+        let mut normal_matrix = Matrix4::<f64>::zeros();
+        let mut rhs = Vector4::<f64>::zeros();
+        let mut weighted_sq = 0.0;
+        let mut weight_sum = 0.0;
+        for p in &self.points {
+            if !(p.in_view && p.step >= FIT_SHARE) {
+                continue;
+            }
+            let edge = &t.edges[p.edge];
+            let normal = rotate(edge.normal, pose.psi);
+            let d = sub(p.at, pose.apex);
+            let depth = edge.offset + edge.bow_at(p.tau);
+            let r = dot(normal, d) - pose.scale * depth;
+            let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
+            let j = Vector4::new(
+                -normal[1] * d[0] + normal[0] * d[1],
+                -normal[0],
+                -normal[1],
+                -depth,
+            );
+            normal_matrix += w * j * j.transpose();
+            rhs += w * r * j;
+            weighted_sq += w * r * r;
+            weight_sum += w;
+        }
+        if normal_matrix[(3, 3)] < 1e-6 {
+            // No edge off the apex: the scale is not observed; hold it.
+            normal_matrix[(3, 3)] = 1.0;
+        }
+        let inverse = normal_matrix.try_inverse()?;
+        let delta = -inverse * rhs;
+        let dof = (weight_sum - 4.0).max(1.0);
+        let variance = weighted_sq / dof;
+        let next = Pose {
+            psi: pose.psi + delta[0],
+            apex: [pose.apex[0] + delta[1], pose.apex[1] + delta[2]],
+            scale: pose.scale + delta[3],
+        };
+        if !(next.psi.is_finite() && next.scale.is_finite() && next.scale > 0.0) {
+            return None;
+        }
+        Some((next, inverse * variance))
+    }
+
+    /// The verdict on the last read's stations at `pose`.
+    fn verify(
+        &mut self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: Pose,
+        sigma: f64,
+        window_rad: f64,
+    ) -> Result<Fit, (Miss, f64)> {
+        let (w, h) = (f64::from(frame.width()), f64::from(frame.height()));
+        let apex_in = pose.apex[0] >= 0.0
+            && pose.apex[1] >= 0.0
+            && pose.apex[0] <= w - 1.0
+            && pose.apex[1] <= h - 1.0;
+        let mut edges = [None; MAX_EDGES];
+        let mut confidence: f64 = 1.0;
+        let mut refusal: Option<Miss> = None;
+        let mut steps = [0.0; MAX_STATIONS];
+        for (e, edge) in t.edges.iter().enumerate() {
+            let points = || self.points.iter().filter(move |p| p.edge == e);
+            let total = points().count();
+            let mut in_view = 0;
+            let mut held = 0;
+            let mut span = [f64::NAN; 2];
+            for p in points().filter(|p| p.in_view) {
+                if in_view < MAX_STATIONS {
+                    steps[in_view] = p.step;
+                }
+                if in_view == 0 {
+                    span[0] = p.tau;
+                }
+                span[1] = p.tau;
+                in_view += 1;
+                held += usize::from(Self::holds_final(t, &pose, p));
+            }
+            let is_apex_edge = t.apex_edges.contains(&e);
+            if in_view < MIN_IN_VIEW.min(total) || (in_view as f64) < IN_VIEW_SHARE * total as f64 {
+                if is_apex_edge && refusal.is_none() {
+                    refusal = Some(Miss::EdgeMissing(EdgeName::intern(&edge.name)));
+                }
+                continue;
+            }
+            let share = held as f64 / in_view as f64;
+            let n = in_view.min(MAX_STATIONS);
+            steps[..n].sort_by(f64::total_cmp);
+            let median_ratio = steps[n / 2];
+            confidence = confidence.min(share);
+            edges[e] = Some(Seen {
+                span,
+                held,
+                stations: in_view,
+                step: median_ratio * edge.step,
+            });
+            if refusal.is_some() {
+                continue;
+            }
+            let name = || EdgeName::intern(&edge.name);
+            if median_ratio < 0.0 {
+                refusal = Some(Miss::WrongAppearance(name()));
+            } else if share < HELD_SHARE {
+                refusal = Some(Miss::EdgeMissing(name()));
+            } else if median_ratio < MIN_STEP_RATIO {
+                refusal = Some(Miss::WrongAppearance(name()));
+            } else if is_apex_edge && !self.apex_held(t, &pose, e) {
+                refusal = Some(Miss::EdgeMissing(name()));
+            } else if self.runs_on(t, &pose, e) {
+                refusal = Some(Miss::ScaleMismatch);
+            }
+        }
+        let refusal = refusal.or_else(|| {
+            if !apex_in {
+                Some(Miss::ApexOutside)
+            } else if pose.psi.abs() > window_rad + 2.0 * sigma {
+                Some(Miss::RotationOutside)
+            } else {
+                None
+            }
+        });
+        match refusal {
+            Some(miss) => Err((miss, confidence)),
+            None => Ok(Fit {
+                pose,
+                angle_sigma_rad: sigma,
+                confidence,
+                edges,
+            }),
+        }
+    }
+
+    fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
+        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
+    }
+
+    /// The [`APEX_STATIONS`] stations nearest the apex on apex edge `e` hold it.
+    fn apex_held(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+        let edge = &t.edges[e];
+        // Stations run from extent[0] to extent[1]; the apex end is the one nearer
+        // tau = 0.
+        let from_low = edge.extent[0].abs() <= edge.extent[1].abs();
+        let stations = self.points.iter().filter(|p| p.edge == e);
+        let count = stations.clone().count();
+        let skip = if from_low {
+            0
+        } else {
+            count.saturating_sub(APEX_STATIONS)
+        };
+        stations
+            .skip(skip)
+            .take(APEX_STATIONS)
+            .all(|p| Self::holds_final(t, pose, p))
+    }
+
+    /// More than one station past a closed end of edge `e` holds it.
+    fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+        let edge = &t.edges[e];
+        let past = |end: usize| {
+            self.points
+                .iter()
+                .filter(|p| p.edge == MAX_EDGES + e)
+                .filter(|p| (p.tau > edge.extent[1]) == (end == 1))
+                .filter(|p| p.step >= RUN_ON_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX)
+                .count()
+        };
+        (0..2).any(|end| !edge.open[end] && past(end) > 1)
+    }
+}

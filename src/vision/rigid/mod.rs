@@ -1,0 +1,370 @@
+//! Rigid probes of named straight edges: a tungsten needle, a tipless cantilever, a
+//! gripper jaw, any probe whose end region is a rigid body bounded by two or more
+//! straight edges. The template is calibrated from clicked pixels on each named edge
+//! (`calibrate`); a frame sees it through a similarity (rotation, scale, apex).
+//!
+//! Tracking a frame (docs/tracker.md, "Rigid probes of named edges"):
+//! - `search`: with no prior, a polarity-gated Hough search places the template from
+//!   its two apex edges and its farthest edge;
+//! - `fit`: each placement is fitted on the full-resolution grey levels, at stations
+//!   along every edge in view (`station`), rotation, apex and scale at once, with
+//!   robust weights; the rotation's standard error comes from the fit's residuals;
+//! - `verify`: the frame shows this probe only when every edge the pose puts in view
+//!   steps as calibrated (polarity, size) along its length and at the apex, no closed
+//!   edge runs on past its end, and the apex, rotation and scale are in range. Each
+//!   refusal names its reason.
+
+mod calibrate;
+mod fit;
+mod search;
+mod station;
+
+use image::GrayImage;
+
+pub use calibrate::calibrate;
+pub use fit::MAX_EDGES;
+
+use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
+use super::pyramid::Pyramid;
+use super::{EdgeFit, Estimate, Miss};
+use fit::{Fit, Fitter};
+use search::Search;
+
+/// One named edge of a rigid probe, in the reference image, relative to the apex.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigidEdge {
+    pub name: String,
+    /// Unit normal pointing into the probe.
+    pub normal: [f64; 2],
+    /// Signed distance of the line from the apex: `normal . (p - apex)` on it.
+    pub offset: f64,
+    /// Positions along `along(normal)` (from the apex's foot on the line) of the ends
+    /// of the segment the reference shows, ascending.
+    pub extent: [f64; 2],
+    /// Whether each end of `extent` is where the reference frame ended (the edge goes
+    /// on) rather than where the edge does.
+    pub open: [bool; 2],
+    /// The edge's bow: its depth from the line is `bow * (tau - bow_ends[0]) * (tau -
+    /// bow_ends[1])` (a real needle's flank is not quite straight); nil for an edge too
+    /// short to show one.
+    pub bow: f64,
+    pub bow_ends: [f64; 2],
+    /// +1 when the probe's side is the brighter one, -1 when it is the darker.
+    pub polarity: f64,
+    /// The step across the edge on the reference, grey levels (inside minus outside,
+    /// times the polarity); at most the median of all edges' steps, since a dark patch
+    /// of background beside one edge on the reference would make its own too large a
+    /// yardstick for frames where the probe has moved on.
+    pub step: f64,
+}
+
+impl RigidEdge {
+    /// The edge's depth at `tau` from its line (its chord), into the probe, pixels.
+    pub fn bow_at(&self, tau: f64) -> f64 {
+        self.bow * (tau - self.bow_ends[0]) * (tau - self.bow_ends[1])
+    }
+
+    /// The point at `tau` along the edge (on its bowed shape), relative to the apex,
+    /// reference pixels.
+    pub fn point(&self, tau: f64) -> [f64; 2] {
+        add(
+            scale(self.normal, self.offset + self.bow_at(tau)),
+            scale(along(self.normal), tau),
+        )
+    }
+
+    /// Length of the segment the reference shows, pixels.
+    pub fn length(&self) -> f64 {
+        self.extent[1] - self.extent[0]
+    }
+}
+
+/// A rigid probe as its reference image shows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigidTemplate {
+    pub edges: Vec<RigidEdge>,
+    /// The tip point, reference pixels: where the two apex edges meet.
+    pub apex: [f64; 2],
+    /// Indices into `edges` of the two edges that meet at the apex.
+    pub apex_edges: [usize; 2],
+    /// Standard error of the reference's own edge directions, combined, radians: the
+    /// floor of any frame's rotation error.
+    pub angle_sigma_rad: f64,
+}
+
+/// Where the template sits in a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// Rotation from the reference, image radians.
+    pub psi: f64,
+    /// Frame pixels per reference pixel.
+    pub scale: f64,
+    /// The apex, frame pixels.
+    pub apex: [f64; 2],
+}
+
+impl Pose {
+    /// Edge `e`'s point at `tau` (reference pixels along it) in the frame.
+    pub fn place(&self, edge: &RigidEdge, tau: f64) -> [f64; 2] {
+        add(
+            self.apex,
+            scale(rotate(edge.point(tau), self.psi), self.scale),
+        )
+    }
+}
+
+/// Bad calibration input for a rigid probe.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RigidError {
+    #[error("calibration: a rigid probe needs at least 2 named edges, {0} given")]
+    TooFewEdges(usize),
+    #[error("calibration: apex edge \"{0}\" is not one of the named edges")]
+    UnknownApexEdge(String),
+    #[error("calibration: the apex needs two different edges; \"{0}\" is given twice")]
+    ApexEdgesSame(String),
+    #[error("calibration: edge \"{edge}\" has {clicks} clicked pixel(s); at least 2 are needed")]
+    TooFewClicks { edge: String, clicks: usize },
+    #[error(
+        "calibration: edge \"{edge}\" click {point:?} is outside the {width}x{height} reference image"
+    )]
+    ClickOutside {
+        edge: String,
+        point: [f64; 2],
+        width: u32,
+        height: u32,
+    },
+    #[error("calibration: edge \"{edge}\" not found near its clicks: {reason}")]
+    EdgeNotFound { edge: String, reason: String },
+    #[error(
+        "calibration: apex edges \"{}\" and \"{}\" meet at {angle_deg:.1} deg; at least 10 deg is needed",
+        edges[0], edges[1]
+    )]
+    ApexEdgesParallel { edges: [String; 2], angle_deg: f64 },
+    #[error("calibration: the apex edges meet at {apex:?}, outside the reference image")]
+    ApexOutside { apex: [f64; 2] },
+}
+
+/// Tracks one rigid probe frame by frame. Buffers are kept between frames.
+#[derive(Debug)]
+pub struct RigidTracker {
+    template: RigidTemplate,
+    window_rad: f64,
+    pyramid: Pyramid,
+    search: Search,
+    fitter: Fitter,
+    placements: Vec<Pose>,
+    last: Option<Pose>,
+    coherence: bool,
+}
+
+impl RigidTracker {
+    /// A tracker of `template` whose rotation is searched within +-`window_deg`.
+    pub fn new(template: RigidTemplate, window_deg: f64) -> RigidTracker {
+        RigidTracker {
+            template,
+            window_rad: window_deg.to_radians(),
+            pyramid: Pyramid::default(),
+            search: Search::default(),
+            fitter: Fitter::default(),
+            placements: Vec::with_capacity(search::MAX_PLACEMENTS + 1),
+            last: None,
+            coherence: false,
+        }
+    }
+
+    pub fn template(&self) -> &RigidTemplate {
+        &self.template
+    }
+
+    /// With coherence on, a frame is first fitted from the last detection's pose, and
+    /// searched whole only when that fails (a time sequence); off, every frame is
+    /// searched whole (frames in any order).
+    pub fn set_coherence(&mut self, on: bool) {
+        self.coherence = on;
+        self.last = None;
+    }
+
+    /// The estimate of one frame. Its force is the caller's (a rigid probe without a
+    /// cantilever has none).
+    pub fn track(&mut self, frame: &GrayImage) -> Estimate {
+        let t = &self.template;
+        if let Some(prior) = self.last.filter(|_| self.coherence) {
+            if let Ok(fit) = self.fitter.fit(frame, t, prior, self.window_rad) {
+                let estimate = estimate(t, &fit);
+                self.last = Some(fit.pose);
+                return estimate;
+            }
+        }
+        self.pyramid
+            .build_binned(frame, search_binning(t, frame.width()));
+        self.search
+            .placements(&self.pyramid, t, self.window_rad, &mut self.placements);
+        if self.placements.is_empty() {
+            self.last = None;
+            return Estimate::missed(Miss::NoCandidates, 0.0);
+        }
+        let mut best: Option<Fit> = None;
+        let mut refusal: Option<(Miss, f64)> = None;
+        for &placement in &self.placements {
+            match self.fitter.fit(frame, t, placement, self.window_rad) {
+                Ok(fit) => {
+                    if best.as_ref().is_none_or(|b| fit.confidence > b.confidence) {
+                        best = Some(fit);
+                    }
+                }
+                Err((miss, confidence)) => {
+                    if refusal.is_none_or(|(_, c)| confidence > c) {
+                        refusal = Some((miss, confidence));
+                    }
+                }
+            }
+        }
+        match best {
+            Some(fit) => {
+                self.last = Some(fit.pose);
+                estimate(t, &fit)
+            }
+            None => {
+                self.last = None;
+                let (miss, confidence) = refusal.unwrap_or((Miss::Inconsistent, 0.0));
+                Estimate::missed(miss, confidence)
+            }
+        }
+    }
+}
+
+/// Shortest an apex edge may be in the search's detection image, pixels: shorter, its
+/// few pixels' votes are lost in the background's.
+const MIN_SEARCH_EDGE_PX: f64 = 8.0;
+
+/// The binning of the search's detection image for a frame `width` pixels wide: the
+/// tracker's usual binning, finer when an apex edge (a needle's blunt end) would be
+/// shorter than [`MIN_SEARCH_EDGE_PX`] there.
+fn search_binning(t: &RigidTemplate, width: u32) -> u32 {
+    let shortest = t
+        .apex_edges
+        .map(|e| t.edges[e].length())
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    let fine = (shortest / MIN_SEARCH_EDGE_PX).floor().max(1.0) as u32;
+    super::pyramid::binning_factor(width).min(fine)
+}
+
+/// The estimate of a verified fit: its pose, standard error and the first three edges'
+/// visible segments.
+fn estimate(t: &RigidTemplate, fit: &Fit) -> Estimate {
+    let mut edges = [None; 3];
+    for (slot, (e, seen)) in edges.iter_mut().zip(t.edges.iter().zip(&fit.edges)) {
+        *slot = seen.map(|s| EdgeFit {
+            start_px: fit.pose.place(e, s.span[0]),
+            end_px: fit.pose.place(e, s.span[1]),
+            support: s.held as u32,
+            contrast: s.step,
+        });
+    }
+    Estimate {
+        detected: true,
+        angle_deg: Some(screen_deg_from_image_rad(fit.pose.psi)),
+        force_nn: None,
+        force_saturated: false,
+        apex_px: Some(fit.pose.apex),
+        edges,
+        angle_sigma_deg: Some(fit.angle_sigma_rad.to_degrees()),
+        scale: Some(fit.pose.scale),
+        confidence: fit.confidence,
+        miss: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::geometry::{image_rad_from_screen_deg, sub};
+
+    /// A blunt needle entering from the left: flanks from far left to a 12 px end face
+    /// whose upper corner is the apex, rotated by `deg` (screen) about the apex at
+    /// `apex`, 4x4 supersampled, probe 180 on 60, with seeded noise of `noise`.
+    fn needle(deg: f64, apex: [f64; 2], noise: f64, seed: u64) -> GrayImage {
+        let psi = image_rad_from_screen_deg(deg);
+        let shape = [[-400.0, -30.0], [0.0, 0.0], [0.0, 12.0], [-400.0, 60.0]];
+        let poly: Vec<[f64; 2]> = shape.iter().map(|p| add(apex, rotate(*p, psi))).collect();
+        let inside = |x: f64, y: f64| {
+            let mut wind = false;
+            for i in 0..poly.len() {
+                let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+                if (a[1] > y) != (b[1] > y) && x < a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
+                {
+                    wind = !wind;
+                }
+            }
+            wind
+        };
+        let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        GrayImage::from_fn(320, 240, |x, y| {
+            let mut cover = 0.0;
+            for i in 0..4 {
+                for j in 0..4 {
+                    let (sx, sy) = (
+                        f64::from(x) - 0.375 + 0.25 * f64::from(i),
+                        f64::from(y) - 0.375 + 0.25 * f64::from(j),
+                    );
+                    cover += if inside(sx, sy) { 1.0 / 16.0 } else { 0.0 };
+                }
+            }
+            let gauss = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
+            image::Luma([(60.0 + 120.0 * cover + noise * gauss)
+                .clamp(0.0, 255.0)
+                .round() as u8])
+        })
+    }
+
+    fn clicks(apex: [f64; 2]) -> Vec<(String, Vec<[f64; 2]>)> {
+        let on = |a: [f64; 2], b: [f64; 2]| {
+            (1..4)
+                .map(|k| add(apex, add(a, scale(sub(b, a), f64::from(k) / 4.0))))
+                .collect::<Vec<_>>()
+        };
+        vec![
+            ("upper".into(), on([-200.0, -15.0], [-20.0, -1.5])),
+            ("lower".into(), on([-200.0, 37.0], [-20.0, 13.8])),
+            ("end".into(), on([0.0, 1.0], [0.0, 11.0])),
+        ]
+    }
+
+    #[test]
+    fn a_blunt_needle_is_calibrated_and_tracked_to_its_rotation() {
+        let apex = [250.0, 100.0];
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        assert!(
+            (template.apex[0] - apex[0]).abs() < 0.2 && (template.apex[1] - apex[1]).abs() < 0.2,
+            "{:?}",
+            template.apex
+        );
+        let mut tracker = RigidTracker::new(template, 20.0);
+        for (k, deg) in [-12.0, -3.5, 0.0, 4.25, 11.0].into_iter().enumerate() {
+            let at = [230.0 + 5.0 * k as f64, 95.0 + 7.0 * k as f64];
+            let frame = needle(deg, at, 8.0, 10 + k as u64);
+            let e = tracker.track(&frame);
+            assert!(e.detected, "{deg}: {e:?}");
+            let err = e.angle_deg.unwrap() - deg;
+            eprintln!(
+                "{deg}: err {err:.4} sigma {:.4} apex {:?} conf {}",
+                e.angle_sigma_deg.unwrap(),
+                e.apex_px,
+                e.confidence
+            );
+            assert!(err.abs() < 0.05, "{deg}: {err}");
+            let apex_err = sub(e.apex_px.unwrap(), at);
+            assert!(apex_err[0].hypot(apex_err[1]) < 0.3, "{deg}: {apex_err:?}");
+        }
+        let blank = needle(0.0, [-500.0, -500.0], 8.0, 3);
+        assert!(!tracker.track(&blank).detected);
+    }
+}

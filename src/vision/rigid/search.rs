@@ -1,0 +1,349 @@
+//! Where a rigid probe may be in a frame with no prior: a polarity-gated Hough search
+//! on the coarse detection image for the two apex edges, which agree on one rotation
+//! and meet at the apex, and for one more edge at a distance from the apex that gives
+//! the scale.
+//!
+//! A pixel of the detection image votes for an edge only at the rotations its
+//! gradient direction allows (the edge's calibrated inward normal and polarity turned
+//! by psi, within a degree and a half), so clutter of the wrong direction or polarity
+//! casts no vote. Per rotation bin the apex edges' best lines are paired; each pair
+//! places the apex; the scale edge's best line at the distances the scale range allows
+//! gives the scale. The best placements, scored by their summed votes, go on to the
+//! fit and the verification.
+
+use super::{Pose, RigidTemplate};
+use crate::vision::geometry::{clip_to_rect, wrap_pi, Line};
+use crate::vision::pyramid::Pyramid;
+
+/// Width of a rotation bin, radians.
+const PSI_STEP: f64 = std::f64::consts::PI / 180.0;
+/// A pixel votes in its own rotation bin and this many either side.
+const SPREAD_BINS: usize = 1;
+/// Gradient magnitudes below this many times the gradient noise do not vote.
+const VOTE_NOISE: f32 = 2.0;
+/// Lines kept per apex edge and rotation bin.
+const LINES_PER_BIN: usize = 3;
+/// Fewest smoothed votes (about twice the pixels) a line needs; a first apex edge's
+/// line only as a peak (its end then places the apex).
+const MIN_VOTES: f32 = 12.0;
+const MIN_PEAK_VOTES: f32 = 4.0;
+/// A detection pixel supports a line within this distance when its gradient is
+/// within this angle of the line's, and a run of support bridges this many pixels
+/// without it.
+const RUN_HALF_WIDTH: i32 = 1;
+const RUN_ANGLE_RAD: f64 = 0.35;
+const RUN_GAP: usize = 2;
+/// Placements handed to the fit, best first.
+pub const MAX_PLACEMENTS: usize = 6;
+/// Placements this close in rotation (bins) and apex (detection pixels) are one.
+const SAME_PSI_BINS: f64 = 2.5;
+const SAME_APEX_PX: f64 = 4.0;
+/// An edge gives the scale when it lies at least this far from the apex, reference
+/// pixels.
+const MIN_SCALE_OFFSET_PX: f64 = 2.0;
+/// The scales searched, frame pixels per reference pixel.
+pub const SCALES: (f64, f64) = (0.5, 2.0);
+
+/// A placement and its votes.
+#[derive(Debug, Clone, Copy)]
+struct Scored {
+    pose: Pose,
+    votes: f32,
+}
+
+/// The accumulators of the search, reused from frame to frame.
+#[derive(Debug, Default)]
+pub struct Search {
+    n_psi: usize,
+    n_rho: usize,
+    psi_min: f64,
+    rho_min: f64,
+    centre: [f64; 2],
+    /// Per voting edge, cos and sin of its normal turned by each rotation bin.
+    trig: Vec<(f32, f32)>,
+    acc: Vec<f32>,
+    smooth: Vec<f32>,
+    scored: Vec<Scored>,
+    /// Per voting edge, its gradient's direction in the reference (image angle).
+    directions: [f64; 3],
+    /// Gradient magnitude a pixel needs to vote or support.
+    threshold: f32,
+}
+
+impl Search {
+    /// The best placements of `template` in the detection image `pyr`, best first,
+    /// into `out` (frame pixels).
+    pub fn placements(
+        &mut self,
+        pyr: &Pyramid,
+        template: &RigidTemplate,
+        window_rad: f64,
+        out: &mut Vec<Pose>,
+    ) {
+        out.clear();
+        let (all_voting, edges) = voting_edges(template);
+        let voting = &all_voting[..edges];
+        let (w, h) = (pyr.width, pyr.height);
+        let half_window = window_rad + SPREAD_BINS as f64 * PSI_STEP;
+        self.n_psi = (2.0 * half_window / PSI_STEP).ceil() as usize + 1;
+        self.psi_min = -half_window;
+        self.centre = [0.5 * w as f64, 0.5 * h as f64];
+        let reach = (self.centre[0].hypot(self.centre[1])).ceil() + 2.0;
+        self.rho_min = -reach;
+        self.n_rho = (2.0 * reach) as usize + 1;
+        let cells = edges * self.n_psi * self.n_rho;
+        self.acc.clear();
+        self.acc.resize(cells, 0.0);
+        self.trig.clear();
+        for &e in voting {
+            let n = template.edges[e].normal;
+            let alpha = n[1].atan2(n[0]);
+            for i in 0..self.n_psi {
+                let (s, c) = (alpha + self.psi_min + i as f64 * PSI_STEP).sin_cos();
+                self.trig.push((c as f32, s as f32));
+            }
+        }
+        let gradient_directions = all_voting.map(|e| {
+            let edge = &template.edges[e];
+            let alpha = edge.normal[1].atan2(edge.normal[0]);
+            if edge.polarity > 0.0 {
+                alpha
+            } else {
+                alpha + std::f64::consts::PI
+            }
+        });
+        let threshold = VOTE_NOISE * pyr.gradient_noise();
+        self.threshold = threshold;
+        self.directions = gradient_directions;
+        let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        let (cx, cy) = (self.centre[0] as f32, self.centre[1] as f32);
+        let rho_min = self.rho_min as f32;
+        for y in 2..h.saturating_sub(2) {
+            for x in 2..w.saturating_sub(2) {
+                let i = y * w + x;
+                if pyr.mag[i] < threshold {
+                    continue;
+                }
+                let theta = f64::from(pyr.gy[i]).atan2(f64::from(pyr.gx[i]));
+                let (dx, dy) = (x as f32 - cx, y as f32 - cy);
+                for (k, beta) in gradient_directions[..edges].iter().enumerate() {
+                    let psi = wrap_pi(theta - beta);
+                    if psi.abs() > window_rad + 0.5 * PSI_STEP {
+                        continue;
+                    }
+                    let bin = ((psi - self.psi_min) / PSI_STEP).round() as usize;
+                    for row in bin - SPREAD_BINS..=bin + SPREAD_BINS {
+                        let (c, s) = self.trig[k * n_psi + row];
+                        let r = (c * dx + s * dy - rho_min).round() as usize;
+                        if r < n_rho {
+                            self.acc[(k * n_psi + row) * n_rho + r] += 1.0;
+                        }
+                    }
+                }
+            }
+        }
+        self.smooth.clear();
+        self.smooth.resize(cells, 0.0);
+        for row in 0..edges * n_psi {
+            let a = &self.acc[row * n_rho..(row + 1) * n_rho];
+            let s = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
+            for r in 1..n_rho - 1 {
+                s[r] = a[r - 1] + 2.0 * a[r] + a[r + 1];
+            }
+        }
+        self.score(pyr, template, voting);
+        for s in &self.scored {
+            if out.len() == MAX_PLACEMENTS {
+                break;
+            }
+            let same = |p: &Pose| {
+                (p.psi - s.pose.psi).abs() <= SAME_PSI_BINS * PSI_STEP
+                    && (p.apex[0] - s.pose.apex[0]).hypot(p.apex[1] - s.pose.apex[1])
+                        <= SAME_APEX_PX * f64::from(pyr.factor)
+            };
+            if !out.iter().any(same) {
+                out.push(s.pose);
+            }
+        }
+    }
+
+    /// Scores every pairing of the apex edges' lines per rotation bin.
+    fn score(&mut self, pyr: &Pyramid, template: &RigidTemplate, voting: &[usize]) {
+        self.scored.clear();
+        let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        let row = |k: usize, i: usize| (k * n_psi + i) * n_rho;
+        let factor = f64::from(pyr.factor);
+        for i in 0..n_psi {
+            let psi = self.psi_min + i as f64 * PSI_STEP;
+            let a = peaks(&self.smooth[row(0, i)..row(0, i) + n_rho]);
+            let b = peaks(&self.smooth[row(1, i)..row(1, i) + n_rho])
+                .map(|p| p.filter(|&(_, v)| v >= MIN_VOTES));
+            let line = |k: usize, r: usize| {
+                let (c, s) = self.trig[k * n_psi + i];
+                let normal = [f64::from(c), f64::from(s)];
+                Line {
+                    normal,
+                    rho: r as f64 + self.rho_min,
+                }
+            };
+            let first = &template.edges[voting[0]];
+            let toward = if first.extent[1].abs() <= first.extent[0].abs() {
+                1.0
+            } else {
+                -1.0
+            };
+            let direction = self.directions[0] + psi;
+            for &(ra, va) in a.iter().flatten() {
+                // The apex where the first apex edge's support ends, and where each of
+                // the second's lines crosses it.
+                let along_run = run_end(
+                    pyr,
+                    &line(0, ra),
+                    self.centre,
+                    direction,
+                    toward,
+                    self.threshold,
+                );
+                let crossings = b
+                    .iter()
+                    .flatten()
+                    .filter_map(|&(rb, vb)| Some((line(0, ra).intersect(&line(1, rb))?, vb)));
+                for (apex, vb) in along_run.map(|p| (p, 0.0)).into_iter().chain(crossings) {
+                    let apex_det = [apex[0] + self.centre[0], apex[1] + self.centre[1]];
+                    if !(apex_det[0] >= 0.0
+                        && apex_det[1] >= 0.0
+                        && apex_det[0] <= (pyr.width - 1) as f64
+                        && apex_det[1] <= (pyr.height - 1) as f64)
+                    {
+                        continue;
+                    }
+                    let (scale, vc) = match voting.get(2) {
+                        Some(&e) => {
+                            let offset = template.edges[e].offset / factor;
+                            let (c, s) = self.trig[2 * n_psi + i];
+                            let at_apex =
+                                f64::from(c) * apex[0] + f64::from(s) * apex[1] - self.rho_min;
+                            let r0 = at_apex + SCALES.0 * offset;
+                            let r1 = at_apex + SCALES.1 * offset;
+                            let (lo, hi) =
+                                (r0.min(r1).max(0.0), r0.max(r1).min((n_rho - 1) as f64));
+                            let cells = &self.smooth[row(2, i)..row(2, i) + n_rho];
+                            let mut best = (f64::NAN, 0.0f32);
+                            let mut r = lo.ceil() as usize;
+                            while (r as f64) <= hi {
+                                if cells[r] > best.1 {
+                                    best = ((r as f64 - at_apex) / offset, cells[r]);
+                                }
+                                r += 1;
+                            }
+                            if best.1 < MIN_VOTES {
+                                continue;
+                            }
+                            best
+                        }
+                        None => (1.0, 0.0),
+                    };
+                    self.scored.push(Scored {
+                        pose: Pose {
+                            psi,
+                            scale,
+                            apex: pyr.to_frame(apex_det),
+                        },
+                        votes: va + vb + vc,
+                    });
+                }
+            }
+        }
+        self.scored.sort_by(|x, y| y.votes.total_cmp(&x.votes));
+    }
+}
+
+/// The far end of the longest run of pixels supporting `line` (detection pixels from
+/// `centre`) with gradients along `direction`, at the end `toward` points to along
+/// it (+1: along `along(normal)`), from `centre`.
+fn run_end(
+    pyr: &Pyramid,
+    line: &Line,
+    centre: [f64; 2],
+    direction: f64,
+    toward: f64,
+    threshold: f32,
+) -> Option<[f64; 2]> {
+    let n = line.normal;
+    let t = [n[1], -n[0]];
+    let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
+    let (w, h) = (pyr.width as f64, pyr.height as f64);
+    let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
+    let (c, s) = (direction.cos() as f32, direction.sin() as f32);
+    let min_dot = (RUN_ANGLE_RAD.cos() as f32) * threshold;
+    let supported = |u: f64| {
+        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH).any(|k| {
+            let x = (foot[0] + t[0] * u + n[0] * f64::from(k)).round() as usize;
+            let y = (foot[1] + t[1] * u + n[1] * f64::from(k)).round() as usize;
+            let i = y * pyr.width + x;
+            pyr.mag[i] >= threshold
+                && pyr.gx[i] * c + pyr.gy[i] * s >= min_dot * pyr.mag[i] / threshold
+        })
+    };
+    let (mut best, mut start, mut gap) = ((0.0, 0.0, 0.0), None, 0);
+    let mut u = u0.ceil();
+    while u <= u1 {
+        if supported(u) {
+            let from = *start.get_or_insert(u);
+            gap = 0;
+            if u - from > best.0 {
+                best = (u - from, from, u);
+            }
+        } else if start.is_some() {
+            gap += 1;
+            if gap > RUN_GAP {
+                start = None;
+            }
+        }
+        u += 1.0;
+    }
+    (best.0 > 0.0).then(|| {
+        let end = if toward > 0.0 { best.2 } else { best.1 };
+        [
+            foot[0] + t[0] * end - centre[0],
+            foot[1] + t[1] * end - centre[1],
+        ]
+    })
+}
+
+/// The edges that vote, and how many do: the two apex edges, then the one farthest
+/// from the apex (its distance gives the scale), if any is.
+fn voting_edges(template: &RigidTemplate) -> ([usize; 3], usize) {
+    let [a, b] = template.apex_edges;
+    let far = (0..template.edges.len())
+        .filter(|e| !template.apex_edges.contains(e))
+        .max_by(|&a, &b| {
+            template.edges[a]
+                .offset
+                .abs()
+                .total_cmp(&template.edges[b].offset.abs())
+        });
+    match far.filter(|&e| template.edges[e].offset.abs() >= MIN_SCALE_OFFSET_PX) {
+        Some(e) => ([a, b, e], 3),
+        None => ([a, b, a], 2),
+    }
+}
+
+/// The best local maxima of a row, (rho bin, votes), at least [`MIN_PEAK_VOTES`].
+fn peaks(row: &[f32]) -> [Option<(usize, f32)>; LINES_PER_BIN] {
+    let mut best = [None; LINES_PER_BIN];
+    for r in 1..row.len().saturating_sub(1) {
+        let v = row[r];
+        if v < MIN_PEAK_VOTES || v < row[r - 1] || v <= row[r + 1] {
+            continue;
+        }
+        let slot = best
+            .iter()
+            .position(|b: &Option<(usize, f32)>| b.is_none_or(|(_, bv)| v > bv));
+        if let Some(k) = slot {
+            best[k..].rotate_right(1);
+            best[k] = Some((r, v));
+        }
+    }
+    best
+}
