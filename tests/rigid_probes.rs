@@ -239,3 +239,87 @@ fn a_tipless_cantilever_is_tracked_over_its_suite() {
 fn a_gripper_jaw_is_tracked_over_its_suite() {
     check(ToolKind::Gripper);
 }
+
+/// `nanoforce replay` of a needle session on disk: probe.toml names its edges and apex
+/// and has no cantilever. Every frame with the needle in view is detected within the
+/// targets' accuracy, the force column stays empty, a frame without the needle names
+/// its refusal.
+#[test]
+fn replay_tracks_a_needle_named_in_its_config_and_reports_no_force() {
+    let session = &tool_suite(ToolKind::Needle, 5, 1, 12, 0)[0];
+    let dir = tempfile::tempdir().unwrap();
+    let frames_dir = dir.path().join("frames");
+    std::fs::create_dir(&frames_dir).unwrap();
+    let mut frame = GrayImage::new(1, 1);
+    render_tool_into(&session.reference, &[], &mut frame);
+    frame.save(dir.path().join("reference.png")).unwrap();
+    let mut truths = Vec::new();
+    for (k, spec) in session.frames.iter().enumerate() {
+        truths.push(render_tool_into(spec, &[], &mut frame));
+        frame
+            .save(frames_dir.join(format!("frame_{k:05}.png")))
+            .unwrap();
+    }
+    // One more frame without the needle: the reference's background alone.
+    let mut blank_spec = session.reference;
+    blank_spec.blank = true;
+    truths.push(render_tool_into(&blank_spec, &[], &mut frame));
+    frame
+        .save(frames_dir.join(format!("frame_{:05}.png", session.frames.len())))
+        .unwrap();
+    let points = |p: &[[f64; 2]]| {
+        let items: Vec<String> = p
+            .iter()
+            .map(|q| format!("[{:.2}, {:.2}]", q[0], q[1]))
+            .collect();
+        format!("[{}]", items.join(", "))
+    };
+    let mut toml = format!(
+        "[tracker]\n[tracker.calibration]\nreference_image = \"reference.png\"\n\
+         apex = [\"{}\", \"{}\"]\n[tracker.calibration.edges]\n",
+        session.apex[0], session.apex[1]
+    );
+    for (name, clicks) in &session.clicks {
+        toml.push_str(&format!("{name} = {}\n", points(clicks)));
+    }
+    std::fs::write(dir.path().join("probe.toml"), toml).unwrap();
+    let csv = dir.path().join("out.csv");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
+        .arg("replay")
+        .arg(&frames_dir)
+        .arg("--config")
+        .arg(dir.path().join("probe.toml"))
+        .arg("--csv")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), truths.len());
+    for (row, truth) in rows.iter().zip(&truths) {
+        let detected = row[col("detected")] == "1" || row[col("detected")] == "true";
+        assert!(row[col("force_nN")].is_empty(), "{row:?}");
+        if !truth.in_view {
+            assert!(!detected, "{row:?}");
+            assert!(!row[col("miss")].is_empty(), "{row:?}");
+            continue;
+        }
+        assert!(detected, "{row:?}");
+        let angle: f64 = row[col("angle_deg")].parse().unwrap();
+        assert!(
+            (angle - truth.angle_deg).abs() < 0.1,
+            "{row:?} vs {}",
+            truth.angle_deg
+        );
+    }
+}

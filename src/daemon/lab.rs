@@ -20,7 +20,7 @@ use crate::sim::config::SimProbe;
 use crate::sim::frames::SimSem;
 use crate::sim::lab as sim_lab;
 use crate::sim::sem::SemScene;
-use crate::vision::{Calibration, Estimate, ProbeSet, Tracker};
+use crate::vision::{Estimate, ProbeSet, Tracker};
 
 // A frame carries truth for as many probes as the tracker follows in one view.
 const _: () = assert!(crate::hw::frames::MAX_TRUTHS == crate::vision::MAX_PROBES);
@@ -198,10 +198,7 @@ fn sim_trackers(config: &Config, scene: &SemScene) -> anyhow::Result<ProbeSet> {
         .probes
         .iter()
         .zip(&clicks)
-        .map(|(probe, clicks)| {
-            let calibration = calibrate(probe, &reference, clicks)?;
-            Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
-        })
+        .map(|(probe, clicks)| calibrate(probe, &reference, clicks))
         .collect::<anyhow::Result<Vec<Tracker>>>()?;
     // One reference frame: the probes are seen at one scale.
     let references = vec![(); trackers.len()];
@@ -243,23 +240,24 @@ pub fn tracker_from_config(config: &Config, probe: &ProbeConfig) -> anyhow::Resu
     };
     let reference = load_gray(&clicks.reference_image)
         .with_context(|| format!("{}: {section}.reference_image", config.path.display()))?;
-    let calibration = calibrate(probe, &reference, clicks)?;
-    Ok(Tracker::new(&probe.tracker, calibration, probe.cantilever))
+    calibrate(probe, &reference, clicks)
 }
 
 fn calibrate(
     probe: &ProbeConfig,
     reference: &GrayImage,
     clicks: &CalibrationConfig,
-) -> anyhow::Result<Calibration> {
-    Calibration::from_reference(reference, clicks, &probe.tracker).with_context(|| {
-        format!(
-            "calibrating the tracker{} on {}",
-            match probe.name.as_str() {
-                SINGLE_NAME => String::new(),
-                name => format!(" of probe {name}"),
-            },
-            clicks.reference_image.display()
-        )
-    })
+) -> anyhow::Result<Tracker> {
+    Tracker::from_reference(reference, clicks, &probe.tracker, probe.cantilever).with_context(
+        || {
+            format!(
+                "calibrating the tracker{} on {}",
+                match probe.name.as_str() {
+                    SINGLE_NAME => String::new(),
+                    name => format!(" of probe {name}"),
+                },
+                clicks.reference_image.display()
+            )
+        },
+    )
 }

@@ -332,6 +332,8 @@ pub enum VisionError {
     EdgeNotFound { edge: Edge, reason: String },
     #[error("calibration: degenerate tip geometry: {0}")]
     Degenerate(String),
+    #[error(transparent)]
+    Rigid(#[from] RigidError),
 }
 
 #[cfg(test)]

@@ -22,13 +22,14 @@ use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
-use super::options::{PixelOrigin, Threshold, TrackerConfig};
+use super::options::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
+use super::rigid::{calibrate as calibrate_rigid, RigidTemplate, RigidTracker};
 use super::stations;
 use super::template::{Pose, Template};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
-use super::{Edge, EdgeFit, Estimate, Miss};
+use super::{Edge, EdgeFit, Estimate, Miss, VisionError};
 use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
@@ -44,7 +45,7 @@ const WINDOW_SIGMAS: f64 = 3.0;
 const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 
 /// A frame missed on the detection image is searched again binned this many times
-/// more coarsely (see [`Tracker::track`]).
+/// more coarsely (see [`PyramidTracker::track`]).
 const COARSE_RETRY: u32 = 2;
 /// ... when the faintest calibrated edge's contrast is below this many gradient noises
 /// of the frame's detection image. Over real backgrounds the frames with noise 30-48
@@ -115,7 +116,7 @@ fn outranks(alt: &Estimate, best: &Estimate, first: f64) -> bool {
     alt.confidence > best.confidence.max(first + RIVAL_MARGIN) && edges(alt) >= edges(best)
 }
 
-/// The detection image of a frame and its edge map: the stages of [`Tracker::track`]
+/// The detection image of a frame and its edge map: the stages of [`PyramidTracker::track`]
 /// that depend only on the frame, the binning and the edge threshold, which the
 /// trackers of several probes in one view share ([`super::ProbeSet`]).
 #[derive(Debug, Default)]
@@ -140,9 +141,9 @@ struct Last {
     psi: f64,
 }
 
-/// Tracks the tip of one calibrated probe, frame after frame.
+/// Tracks the AFM pyramid's tip of one calibrated probe, frame after frame.
 #[derive(Debug)]
-pub struct Tracker {
+pub struct PyramidTracker {
     threshold: Threshold,
     window_rad: f64,
     calibration: Calibration,
@@ -167,16 +168,16 @@ pub struct Tracker {
     refiner: Refiner,
 }
 
-impl Tracker {
+impl PyramidTracker {
     /// A tracker for the probe `calibration` describes; `cantilever` enables forces.
     pub fn new(
         cfg: &TrackerConfig,
         calibration: Calibration,
         cantilever: Option<Cantilever>,
-    ) -> Tracker {
+    ) -> PyramidTracker {
         let tied =
             Turns::Tied(Edge::ALL.map(|e| calibration.edge(e).orientation_sigma_deg.to_radians()));
-        Tracker {
+        PyramidTracker {
             threshold: cfg.threshold,
             window_rad: cfg.window_deg.to_radians(),
             calibration,
@@ -224,7 +225,7 @@ impl Tracker {
         self.track_frame(frame)
     }
 
-    /// As [`Tracker::track`], with the detection stages `shared` holds for this frame
+    /// As [`PyramidTracker::track`], with the detection stages `shared` holds for this frame
     /// (from another probe's tracker) reused where they match this tracker's (the same
     /// binning, the same edge threshold); `shared` then holds this tracker's.
     pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
@@ -255,7 +256,7 @@ impl Tracker {
     }
 
     /// Tracks the frame just tracked again, from the state before it (with what is
-    /// now ruled out), sharing detection stages as [`Tracker::track_sharing`].
+    /// now ruled out), sharing detection stages as [`PyramidTracker::track_sharing`].
     pub(super) fn retrack_sharing(
         &mut self,
         frame: &GrayImage,
@@ -563,6 +564,169 @@ impl Tracker {
             miss: None,
         }
     }
+}
+
+/// Tracks one calibrated probe frame after frame: the AFM pyramid (red, blue, green)
+/// or a rigid probe of named edges ([`super::rigid`]). Either gives the one
+/// [`Estimate`]; a probe with a cantilever gives its force.
+#[derive(Debug)]
+pub struct Tracker {
+    engine: Engine,
+}
+
+#[derive(Debug)]
+enum Engine {
+    Pyramid(Box<PyramidTracker>),
+    Rigid {
+        tracker: Box<RigidTracker>,
+        cantilever: Option<Cantilever>,
+        pixel_origin: PixelOrigin,
+    },
+}
+
+impl Tracker {
+    /// The AFM pyramid's tracker for the probe `calibration` describes; `cantilever`
+    /// enables forces.
+    pub fn new(
+        cfg: &TrackerConfig,
+        calibration: Calibration,
+        cantilever: Option<Cantilever>,
+    ) -> Tracker {
+        Tracker {
+            engine: Engine::Pyramid(Box::new(PyramidTracker::new(cfg, calibration, cantilever))),
+        }
+    }
+
+    /// A rigid probe's tracker; `cantilever` (a tipless cantilever's) turns its
+    /// rotation into a force.
+    pub fn rigid(
+        cfg: &TrackerConfig,
+        template: RigidTemplate,
+        cantilever: Option<Cantilever>,
+    ) -> Tracker {
+        let mut tracker = RigidTracker::new(template, cfg.window_deg);
+        tracker.set_coherence(true);
+        Tracker {
+            engine: Engine::Rigid {
+                tracker: Box::new(tracker),
+                cantilever,
+                pixel_origin: cfg.pixel_origin,
+            },
+        }
+    }
+
+    /// The tracker `clicks` calibrate on `reference`: the pyramid's for red, blue and
+    /// green, a rigid probe's for named edges.
+    pub fn from_reference(
+        reference: &GrayImage,
+        clicks: &CalibrationConfig,
+        cfg: &TrackerConfig,
+        cantilever: Option<Cantilever>,
+    ) -> Result<Tracker, VisionError> {
+        match (&clicks.apex, clicks.pyramid_points()) {
+            (None, Some(_)) => {
+                let calibration = Calibration::from_reference(reference, clicks, cfg)?;
+                Ok(Tracker::new(cfg, calibration, cantilever))
+            }
+            (apex, _) => {
+                let apex = apex.as_ref().ok_or_else(|| {
+                    VisionError::Degenerate("a probe of named edges needs its apex edges".into())
+                })?;
+                let template = calibrate_rigid(
+                    reference,
+                    &clicks.edges,
+                    [apex[0].as_str(), apex[1].as_str()],
+                )?;
+                Ok(Tracker::rigid(cfg, template, cantilever))
+            }
+        }
+    }
+
+    /// Turns coherence (searching near the last estimate first) on or off.
+    pub fn set_coherence(&mut self, on: bool) {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.set_coherence(on),
+            Engine::Rigid { tracker, .. } => tracker.set_coherence(on),
+        }
+    }
+
+    /// Forgets the last estimate.
+    pub fn reset(&mut self) {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.reset(),
+            Engine::Rigid { tracker, .. } => tracker.reset(),
+        }
+    }
+
+    /// The pyramid's calibration; none for a rigid probe of named edges.
+    pub fn calibration(&self) -> Option<&Calibration> {
+        match &self.engine {
+            Engine::Pyramid(t) => Some(t.calibration()),
+            Engine::Rigid { .. } => None,
+        }
+    }
+
+    /// Where the configuration counts pixels from: estimates are in the conventions'
+    /// frame, and what writes them out converts with [`Estimate::with_pixel_origin`].
+    pub fn pixel_origin(&self) -> PixelOrigin {
+        match &self.engine {
+            Engine::Pyramid(t) => t.pixel_origin(),
+            Engine::Rigid { pixel_origin, .. } => *pixel_origin,
+        }
+    }
+
+    /// Tracks the probe in one 8-bit frame.
+    pub fn track(&mut self, frame: &GrayImage) -> Estimate {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.track(frame),
+            Engine::Rigid {
+                tracker,
+                cantilever,
+                ..
+            } => with_force(tracker.track(frame), *cantilever),
+        }
+    }
+
+    /// As [`Tracker::track`], sharing the pyramid's detection stages with the other
+    /// probes' trackers ([`PyramidTracker::track_sharing`]).
+    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.track_sharing(frame, shared),
+            Engine::Rigid { .. } => self.track(frame),
+        }
+    }
+
+    /// Rules out one more pyramid; false when it already was, no room is left, or the
+    /// probe is a rigid one (whose search has no runners-up to turn to).
+    pub(super) fn exclude_more(&mut self, claim: Claim) -> bool {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.exclude_more(claim),
+            Engine::Rigid { .. } => false,
+        }
+    }
+
+    /// Tracks the frame just tracked again with what is now ruled out
+    /// ([`PyramidTracker::retrack_sharing`]).
+    pub(super) fn retrack_sharing(
+        &mut self,
+        frame: &GrayImage,
+        shared: &mut Detection,
+    ) -> Estimate {
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.retrack_sharing(frame, shared),
+            Engine::Rigid { .. } => self.track(frame),
+        }
+    }
+}
+
+/// A rigid probe's detection with its cantilever's force, when it has one.
+fn with_force(mut estimate: Estimate, cantilever: Option<Cantilever>) -> Estimate {
+    if let (true, Some(angle), Some(c)) = (estimate.detected, estimate.angle_deg, cantilever) {
+        let force = c.force_nn(angle);
+        estimate.force_nn = Some(force.value);
+        estimate.force_saturated = force.saturated;
+    }
+    estimate
 }
 
 #[cfg(test)]

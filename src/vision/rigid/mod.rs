@@ -184,6 +184,11 @@ impl RigidTracker {
         self.last = None;
     }
 
+    /// Forgets the last pose.
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+
     /// The estimate of one frame. Its force is the caller's (a rigid probe without a
     /// cantilever has none).
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
