@@ -6,7 +6,9 @@
 //! - `window/<deg>`: the same 640x480 frame for a Hough window of 10, 20 and 40 deg;
 //! - `clutter/<scratches>`: the same frame with more and more clutter;
 //! - `probes/<size>/<n>-of-<count>`: two probes at 640x480 and four at 1024x768 in
-//!   one view, and the first of them alone on the same frames.
+//!   one view, and the first of them alone on the same frames;
+//! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
+//!   jaw), each frame searched whole, over eight frames of its tool suite.
 //!
 //! `cargo bench --bench tracker`; docs/tracker.md records the numbers.
 use std::path::Path;
@@ -14,8 +16,11 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use image::GrayImage;
 use nanoforce::config::{Config, TrackerConfig};
-use nanoforce::scene::{self, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style};
-use nanoforce::vision::{Calibration, Estimate, ProbeSet, Tracker};
+use nanoforce::scene::{
+    self, render_tool_into, tool_suite, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style,
+    ToolKind,
+};
+use nanoforce::vision::{calibrate_rigid, Calibration, Estimate, ProbeSet, RigidTracker, Tracker};
 
 /// A session of the typical probe at `width`, calibrated, with the given frames.
 fn tracker_for(width: u32, window_deg: f64) -> (Setup, Tracker) {
@@ -159,11 +164,49 @@ fn bench_probes(c: &mut Criterion) {
     }
 }
 
+/// `rigid/<kind>`: a rigid probe searched whole in each of eight frames of the first
+/// sessions of its tool suite (synthetic backgrounds), per frame.
+fn bench_rigid(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rigid");
+    for kind in ToolKind::ALL {
+        let sessions = tool_suite(kind, 41, 2, 8, 0);
+        let session = &sessions[0];
+        let mut frame = GrayImage::new(1, 1);
+        render_tool_into(&session.reference, &[], &mut frame);
+        let clicks: Vec<(String, Vec<[f64; 2]>)> = session
+            .clicks
+            .iter()
+            .map(|(n, p)| (n.to_string(), p.clone()))
+            .collect();
+        let template = calibrate_rigid(&frame, &clicks, session.apex).expect("calibrates");
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let frames: Vec<GrayImage> = session
+            .frames
+            .iter()
+            .filter(|f| !f.blank)
+            .map(|f| {
+                let mut g = GrayImage::new(1, 1);
+                render_tool_into(f, &[], &mut g);
+                g
+            })
+            .collect();
+        group.throughput(Throughput::Elements(frames.len() as u64));
+        group.bench_function(kind.name(), |b| {
+            b.iter(|| {
+                for f in &frames {
+                    tracker.track(f);
+                }
+            })
+        });
+    }
+}
+
 criterion_group!(
     benches,
     bench_sizes,
     bench_window,
     bench_clutter,
-    bench_probes
+    bench_probes,
+    bench_rigid
 );
 criterion_main!(benches);

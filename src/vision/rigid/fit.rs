@@ -32,6 +32,10 @@ const STEPS_PER_PASS: usize = 2;
 /// Station spacing along an edge, frame pixels, and the most stations per edge.
 const SPACING_PX: f64 = 5.0;
 const MAX_STATIONS: usize = 48;
+/// Passes reaching farther than this (frame pixels) read at most [`COARSE_STATIONS`]
+/// per edge: they only bring the pose within the fine passes' reach.
+const FINE_REACH_PX: f64 = 3.0;
+const COARSE_STATIONS: usize = 12;
 /// Stations keep this far from an edge's closed ends, frame pixels (the blurred
 /// corner belongs to both edges).
 const CORNER_PX: f64 = 3.0;
@@ -125,7 +129,12 @@ impl Fitter {
         let mut pose = start;
         let mut covariance = Matrix4::zeros();
         for (pass, &reach) in REACHES.iter().enumerate() {
-            self.read(frame, template, &pose, reach, false);
+            let stations = if reach > FINE_REACH_PX {
+                COARSE_STATIONS
+            } else {
+                MAX_STATIONS
+            };
+            self.read(frame, template, &pose, reach, stations, false);
             if pass == 1 {
                 let (held, total) = self.held();
                 if total == 0 || (held as f64) < ABANDON_SHARE * total as f64 {
@@ -143,7 +152,14 @@ impl Fitter {
                 return Err((Miss::ScaleMismatch, 0.0));
             }
         }
-        self.read(frame, template, &pose, REACHES[REACHES.len() - 1], true);
+        self.read(
+            frame,
+            template,
+            &pose,
+            REACHES[REACHES.len() - 1],
+            MAX_STATIONS,
+            true,
+        );
         let sigma =
             (covariance[(0, 0)].max(0.0).sqrt() * SIGMA_FACTOR).hypot(template.angle_sigma_rad);
         self.verify(frame, template, pose, sigma, window_rad)
@@ -157,6 +173,7 @@ impl Fitter {
         t: &RigidTemplate,
         pose: &Pose,
         reach: f64,
+        most: usize,
         beyond: bool,
     ) {
         self.points.clear();
@@ -169,7 +186,7 @@ impl Fitter {
                 continue;
             }
             let count = (((hi - lo) * pose.scale / SPACING_PX).floor() as usize + 1)
-                .clamp(MIN_IN_VIEW, MAX_STATIONS);
+                .clamp(MIN_IN_VIEW, most);
             for k in 0..count {
                 let tau = lo + (hi - lo) * k as f64 / (count - 1) as f64;
                 let q = pose.place(edge, tau);

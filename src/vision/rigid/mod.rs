@@ -213,8 +213,12 @@ impl RigidTracker {
         for &placement in &self.placements {
             match self.fitter.fit(frame, t, placement, self.window_rad) {
                 Ok(fit) => {
+                    let sure = fit.confidence >= SURE_CONFIDENCE;
                     if best.as_ref().is_none_or(|b| fit.confidence > b.confidence) {
                         best = Some(fit);
+                    }
+                    if sure {
+                        break;
                     }
                 }
                 Err((miss, confidence)) => {
@@ -237,6 +241,10 @@ impl RigidTracker {
         }
     }
 }
+
+/// A verified placement this confident (every edge held at this share of its
+/// stations) ends the search: the placements after it have fewer votes.
+const SURE_CONFIDENCE: f64 = 0.9;
 
 /// Shortest an apex edge may be in the search's detection image, pixels: shorter, its
 /// few pixels' votes are lost in the background's.
