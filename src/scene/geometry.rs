@@ -318,15 +318,15 @@ pub(super) fn ccw_normal(v: [f64; 2]) -> [f64; 2] {
     [v[1], -v[0]]
 }
 
-fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+pub(super) fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] + b[0], a[1] + b[1]]
 }
 
-fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+pub(super) fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     [a[0] - b[0], a[1] - b[1]]
 }
 
-fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
+pub(super) fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
     [a[0] * k, a[1] * k]
 }
 

@@ -15,7 +15,7 @@
 //! `span_um` from the end face's corner and runs straight on beyond it along the arc's
 //! end tangent; its true edge is the chord, the straight line through the arc's ends.
 
-use super::geometry::{base_direction, ccw_normal, Pose, Segment};
+use super::geometry::{add, base_direction, ccw_normal, scale, sub, Pose, Segment};
 use super::rng::Rng;
 use super::spec::FrameSpec;
 
@@ -362,18 +362,6 @@ impl Placed {
         let len = tangent[0].hypot(tangent[1]).max(1e-12);
         add(self.point(k, ARC_SEGMENTS), scale(tangent, reach / len))
     }
-}
-
-fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] + b[0], a[1] + b[1]]
-}
-
-fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
-    [a[0] * k, a[1] * k]
 }
 
 #[cfg(test)]

@@ -35,7 +35,7 @@ use std::collections::VecDeque;
 use image::GrayImage;
 
 use super::calibration::SYMMETRIC_BASES;
-use super::geometry::{add, dot, norm, principal_axis, scale, sub, unit, Line};
+use super::geometry::{add, bilinear, dot, norm, principal_axis, scale, sub, unit, Line};
 use super::options::{CalibrationConfig, TrackerConfig};
 use super::{Calibration, VisionError};
 
@@ -141,20 +141,6 @@ enum Search {
     Rays,
 }
 
-/// Bilinear grey level at `p`, `None` outside the image.
-fn grey(img: &GrayImage, p: [f64; 2]) -> Option<f64> {
-    let (w, h) = (img.width() as f64, img.height() as f64);
-    if !(p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0) {
-        return None;
-    }
-    let (x0, y0) = (p[0].floor().min(w - 2.0), p[1].floor().min(h - 2.0));
-    let (fx, fy) = (p[0] - x0, p[1] - y0);
-    let at = |dx: f64, dy: f64| img.get_pixel((x0 + dx) as u32, (y0 + dy) as u32)[0] as f64;
-    let top = at(0.0, 0.0) * (1.0 - fx) + at(1.0, 0.0) * fx;
-    let bottom = at(0.0, 1.0) * (1.0 - fx) + at(1.0, 1.0) * fx;
-    Some(top * (1.0 - fy) + bottom * fy)
-}
-
 /// The normal of direction `d` turned towards `towards` (relative to `d`'s origin).
 fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
     let n = [-d[1], d[0]];
@@ -186,7 +172,7 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
         let u = unit(k as f64 * step);
         let mut sum = 0.0;
         for dr in [-2.0, -1.0, 0.0, 1.0, 2.0] {
-            let v = grey(img, add(apex, scale(u, RING_PX + dr)));
+            let v = bilinear(img, add(apex, scale(u, RING_PX + dr)));
             sum += v.ok_or_else(|| {
                 not_found(format!(
                     "the apex ({:.1}, {:.1}) is within {RING_PX} px of the border",
@@ -258,7 +244,7 @@ fn ray_steps(img: &GrayImage, apex: [f64; 2], angle: f64) -> Vec<Option<f64>> {
     (RAYS_PX.0..RAYS_PX.1)
         .map(|r| {
             let p = add(apex, scale(u, r as f64));
-            Some(grey(img, add(p, n))? - grey(img, sub(p, n))?)
+            Some(bilinear(img, add(p, n))? - bilinear(img, sub(p, n))?)
         })
         .collect()
 }
@@ -339,7 +325,7 @@ fn ground_level(img: &GrayImage, faces: &[Traced; 2], axis: [f64; 2]) -> f64 {
         let (a, b) = f.span;
         let mut t = a;
         while t <= b {
-            if let Some(v) = grey(img, add(f.at(t), out)) {
+            if let Some(v) = bilinear(img, add(f.at(t), out)) {
                 levels.push(v);
             }
             t += 1.0;
@@ -355,7 +341,7 @@ fn crossing(img: &GrayImage, centre: [f64; 2], n: [f64; 2], polarity: f64) -> Op
     let d = [n[1], -n[0]];
     let at = |s: f64| -> Option<f64> {
         let p = add(centre, scale(n, s));
-        Some(0.5 * (grey(img, add(p, scale(d, 0.5)))? + grey(img, sub(p, scale(d, 0.5)))?))
+        Some(0.5 * (bilinear(img, add(p, scale(d, 0.5)))? + bilinear(img, sub(p, scale(d, 0.5)))?))
     };
     let (a, b) = LEVEL_PX;
     let mut inside = 0.0;
@@ -404,7 +390,7 @@ fn trace(
     while t < limit && misses < MISSES {
         let centre = add(origin, scale(dir, t));
         let Some((x, step)) = crossing(img, centre, n, polarity) else {
-            if grey(img, centre).is_none() {
+            if bilinear(img, centre).is_none() {
                 break;
             }
             misses += 1;
@@ -653,7 +639,7 @@ fn red_edge(
         let c = add(apex, scale(axis, t));
         let mut sum = 0.0;
         for s in [-1.0, 0.0, 1.0] {
-            sum += grey(img, add(c, scale(side, s)))?;
+            sum += bilinear(img, add(c, scale(side, s)))?;
         }
         Some(sum / 3.0)
     };
@@ -693,8 +679,8 @@ fn red_edge(
         while s <= RED_SCORE_PX {
             let c = add(p, scale(d, s));
             if let (Some(a), Some(b)) = (
-                grey(img, add(c, scale(n, 2.5))),
-                grey(img, sub(c, scale(n, 2.5))),
+                bilinear(img, add(c, scale(n, 2.5))),
+                bilinear(img, sub(c, scale(n, 2.5))),
             ) {
                 score += (polarity * (a - b)).max(0.0);
             }

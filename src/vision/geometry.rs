@@ -65,6 +65,23 @@ pub fn principal_axis(pts: &[[f64; 2]]) -> ([f64; 2], f64, f64) {
     (c, 0.5 * (2.0 * sxy).atan2(sxx - syy), sxx + syy)
 }
 
+/// Bilinear grey level of `img` at `p`, `None` outside its pixel centres.
+pub fn bilinear(img: &image::GrayImage, p: [f64; 2]) -> Option<f64> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (x, y) = (p[0], p[1]);
+    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
+        return None;
+    }
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let raw = img.as_raw();
+    let v = |xx: usize, yy: usize| f64::from(raw[yy * w + xx]);
+    let top = v(x0, y0) + fx * (v(x1, y0) - v(x0, y0));
+    let bottom = v(x0, y1) + fx * (v(x1, y1) - v(x0, y1));
+    Some(top + fy * (bottom - top))
+}
+
 /// Rotates `v` by an image angle.
 pub fn rotate(v: [f64; 2], angle_rad: f64) -> [f64; 2] {
     let (s, c) = angle_rad.sin_cos();

@@ -13,7 +13,7 @@
 
 use image::GrayImage;
 
-use crate::vision::geometry::{add, along, scale};
+use crate::vision::geometry::{add, along, bilinear, scale};
 
 /// Samples averaged along the edge per profile point, one pixel apart.
 const RUN: usize = 7;
@@ -44,23 +44,6 @@ pub struct Stations {
     profile: Vec<f64>,
 }
 
-/// Bilinear grey level at `p`, `None` outside the frame's pixel centres.
-pub fn grey(frame: &GrayImage, p: [f64; 2]) -> Option<f64> {
-    let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let (x, y) = (p[0], p[1]);
-    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let raw = frame.as_raw();
-    let v = |xx: usize, yy: usize| f64::from(raw[yy * w + xx]);
-    let top = v(x0, y0) + fx * (v(x1, y0) - v(x0, y0));
-    let bottom = v(x0, y1) + fx * (v(x1, y1) - v(x0, y1));
-    Some(top + fy * (bottom - top))
-}
-
 impl Stations {
     /// The step of polarity `polarity` nearest in strength to the edge's, within
     /// `reach` pixels of `at` along the inward unit normal `normal`. `None` when the
@@ -82,7 +65,7 @@ impl Stations {
             let centre = add(at, scale(normal, lo + i as f64 * DT));
             let mut sum = 0.0;
             for j in 0..RUN {
-                sum += grey(frame, add(centre, scale(tangent, j as f64 - half)))?;
+                sum += bilinear(frame, add(centre, scale(tangent, j as f64 - half)))?;
             }
             self.profile.push(sum / RUN as f64);
         }
