@@ -1,5 +1,6 @@
-//! Vision: finds the AFM probe's rigid pyramid tip in an SEM frame and measures its
-//! rotation from the reference image, the quantity the elastica turns into a force.
+//! Vision: finds the AFM probe's rigid pyramid tip (or any rigid probe of named edges)
+//! in an SEM frame and measures its rotation from the reference image, the quantity
+//! the elastica turns into a force.
 //!
 //! The pipeline starts from the paper's (threshold, Canny, one Hough line search per tip
 //! edge within +-window of its calibrated orientation) and goes beyond it:
@@ -25,7 +26,10 @@
 //!   calibration;
 //! - `overlay`: the paper's Figure 8 picture for a frame or a calibration;
 //! - `probes`: several probes in one view, each with its own tracker; `claim`: the
-//!   body a detection claims of its frame.
+//!   body a detection claims of its frame;
+//! - `rigid`: any other rigid probe (a needle, a tipless cantilever, a gripper jaw),
+//!   calibrated from its named edges and tracked by its own search, fit and checks;
+//!   [`Tracker`] is either engine (docs/tracker.md, "Rigid probes of named edges").
 //!
 //! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.
