@@ -71,8 +71,10 @@ const HUBER_K: f64 = 1.5;
 /// stations' runs overlap and the blur correlates them (measured on the rendered
 /// suites, tests/rigid_probes.rs).
 const SIGMA_FACTOR: f64 = 1.2;
-/// Apex stations: the stations nearest the apex on each apex edge that must hold.
-const APEX_STATIONS: usize = 2;
+/// Apex stations: of the stations nearest the apex on each apex edge, the nearest and
+/// all but one must hold (a tip hidden under a particle holds none; noise can drop one
+/// behind the nearest).
+const APEX_STATIONS: usize = 3;
 
 /// One edge as a fit saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -400,7 +402,8 @@ impl Fitter {
         p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
     }
 
-    /// The [`APEX_STATIONS`] stations nearest the apex on apex edge `e` hold it.
+    /// The nearest and all but one of the [`APEX_STATIONS`] stations nearest the apex on
+    /// apex edge `e` hold it.
     fn apex_held(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
         let edge = &t.edges[e];
         // Stations run from extent[0] to extent[1]; the apex end is the one nearer
@@ -408,15 +411,15 @@ impl Fitter {
         let from_low = edge.extent[0].abs() <= edge.extent[1].abs();
         let stations = self.points.iter().filter(|p| p.edge == e);
         let count = stations.clone().count();
-        let skip = if from_low {
-            0
-        } else {
-            count.saturating_sub(APEX_STATIONS)
-        };
-        stations
-            .skip(skip)
-            .take(APEX_STATIONS)
-            .all(|p| Self::holds_final(t, pose, p))
+        let nearest = APEX_STATIONS.min(count);
+        let mut held = [false; APEX_STATIONS];
+        let skip = if from_low { 0 } else { count - nearest };
+        for (k, p) in stations.skip(skip).take(nearest).enumerate() {
+            // Counted from the apex.
+            let slot = if from_low { k } else { nearest - 1 - k };
+            held[slot] = Self::holds_final(t, pose, p);
+        }
+        held[0] && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
     }
 
     /// More than one station past a closed end of edge `e` holds it.
