@@ -193,6 +193,10 @@ impl RigidTracker {
     /// cantilever has none).
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
         let t = &self.template;
+        if frame.width() < MIN_FRAME_PX || frame.height() < MIN_FRAME_PX {
+            self.last = None;
+            return Estimate::missed(Miss::NoCandidates, 0.0);
+        }
         if let Some(prior) = self.last.filter(|_| self.coherence) {
             if let Ok(fit) = self.fitter.fit(frame, t, prior, self.window_rad) {
                 let estimate = estimate(t, &fit);
@@ -241,6 +245,9 @@ impl RigidTracker {
         }
     }
 }
+
+/// Frames narrower or lower than this, pixels, show no probe to track.
+const MIN_FRAME_PX: u32 = 16;
 
 /// A verified placement this confident (every edge held at this share of its
 /// stations) ends the search: the placements after it have fewer votes.
@@ -379,5 +386,9 @@ mod tests {
         }
         let blank = needle(0.0, [-500.0, -500.0], 8.0, 3);
         assert!(!tracker.track(&blank).detected);
+        for (w, h) in [(1, 1), (3, 2), (16, 16), (17, 300)] {
+            let tiny = GrayImage::from_pixel(w, h, image::Luma([128]));
+            assert!(!tracker.track(&tiny).detected, "{w}x{h}");
+        }
     }
 }

@@ -12,7 +12,7 @@
 //! fit and the verification.
 
 use super::{Pose, RigidTemplate};
-use crate::vision::geometry::{clip_to_rect, wrap_pi, Line};
+use crate::vision::geometry::{clip_to_rect, truncate_index, Line};
 use crate::vision::pyramid::Pyramid;
 
 /// Width of a rotation bin, radians.
@@ -118,25 +118,37 @@ impl Search {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         let (cx, cy) = (self.centre[0] as f32, self.centre[1] as f32);
         let rho_min = self.rho_min as f32;
+        // In f32 with truncations of non-negative values: this loop runs over every
+        // strong gradient of the frame, where a libm atan2 in f64 and `round` calls
+        // cost half the search.
+        let directions32 = gradient_directions.map(|d| d as f32);
+        let (psi_min, reach) = (self.psi_min as f32, (window_rad + 0.5 * PSI_STEP) as f32);
+        let step = PSI_STEP as f32;
         for y in 2..h.saturating_sub(2) {
             for x in 2..w.saturating_sub(2) {
                 let i = y * w + x;
                 if pyr.mag[i] < threshold {
                     continue;
                 }
-                let theta = f64::from(pyr.gy[i]).atan2(f64::from(pyr.gx[i]));
+                let theta = pyr.gy[i].atan2(pyr.gx[i]);
                 let (dx, dy) = (x as f32 - cx, y as f32 - cy);
-                for (k, beta) in gradient_directions[..edges].iter().enumerate() {
-                    let psi = wrap_pi(theta - beta);
-                    if psi.abs() > window_rad + 0.5 * PSI_STEP {
+                for (k, beta) in directions32[..edges].iter().enumerate() {
+                    let psi = wrap_pi_f32(theta - beta);
+                    if psi.abs() > reach {
                         continue;
                     }
-                    let bin = ((psi - self.psi_min) / PSI_STEP).round() as usize;
+                    // Within the window the bin and its neighbours lie in the
+                    // accumulator; the clamp keeps rounding at its ends from stepping out.
+                    let bin = truncate_index((psi - psi_min) / step + 0.5)
+                        .clamp(SPREAD_BINS, n_psi - 1 - SPREAD_BINS);
                     for row in bin - SPREAD_BINS..=bin + SPREAD_BINS {
                         let (c, s) = self.trig[k * n_psi + row];
-                        let r = (c * dx + s * dy - rho_min).round() as usize;
-                        if r < n_rho {
-                            self.acc[(k * n_psi + row) * n_rho + r] += 1.0;
+                        let r = c * dx + s * dy - rho_min + 0.5;
+                        if r >= 0.0 {
+                            let r = truncate_index(r);
+                            if r < n_rho {
+                                self.acc[(k * n_psi + row) * n_rho + r] += 1.0;
+                            }
                         }
                     }
                 }
@@ -309,6 +321,19 @@ fn run_end(
             foot[1] + t[1] * end - centre[1],
         ]
     })
+}
+
+/// Wraps an angle difference (within two turns) to (-pi, pi].
+fn wrap_pi_f32(a: f32) -> f32 {
+    use std::f32::consts::{PI, TAU};
+    let mut a = a;
+    while a > PI {
+        a -= TAU;
+    }
+    while a <= -PI {
+        a += TAU;
+    }
+    a
 }
 
 /// The edges that vote, and how many do: the two apex edges, then the one farthest
