@@ -34,6 +34,7 @@ pub mod rng;
 mod session;
 mod spec;
 mod tool;
+mod tool_shape;
 mod tool_suite;
 
 use std::cell::RefCell;
@@ -49,10 +50,8 @@ pub use session::{
     Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
 };
 pub use spec::{FrameSpec, Look, Others, Placement, Style, MAX_OTHER_PROBES};
-pub use tool::{
-    clip_to_frame, tool_truth, Flank, ToolGeometry, ToolKind, ToolTruth, DEFAULT_SPAN_UM, MAX_BOW,
-    TOOL_FLANKS,
-};
+pub use tool::{clip_to_frame, tool_truth, ToolTruth};
+pub use tool_shape::{Flank, ToolGeometry, ToolKind, DEFAULT_SPAN_UM, MAX_BOW, TOOL_FLANKS};
 pub use tool_suite::{tool_suite, ToolSession, CLICKS_PER_EDGE, TIP_MARGIN_PX, TIP_REGION};
 
 thread_local! {

@@ -4,7 +4,7 @@
 
 use super::background::{Needle, RealLook};
 use super::geometry::{px_per_um, Entry, Pose, ProbeGeometry};
-use super::tool::ToolGeometry;
+use super::tool_shape::ToolGeometry;
 use crate::vision::MAX_PROBES;
 
 /// The looks of the public samples, from an easy frame to a hard one.

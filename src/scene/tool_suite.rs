@@ -9,7 +9,8 @@ use super::geometry::{rotate, Entry, Segment};
 use super::rng::{sub_seed, Rng};
 use super::session::Setup;
 use super::spec::{FrameSpec, Look, Style};
-use super::tool::{clip_to_frame, tool_truth, ToolGeometry, ToolKind, ToolTruth};
+use super::tool::{clip_to_frame, tool_truth, ToolTruth};
+use super::tool_shape::{ToolGeometry, ToolKind};
 
 /// One tool seen in a series of frames, with its calibration frame and clicks.
 #[derive(Debug, Clone, PartialEq)]
