@@ -58,6 +58,8 @@ mod verify;
 
 use std::fmt;
 
+use crate::model::Cantilever;
+
 pub use autocal::{auto_calibrate, clicks_from_apex, find_apex, AutoCalError, AutoClicks};
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
@@ -284,6 +286,18 @@ impl Estimate {
     pub fn felt_force_nn(&self) -> Option<f64> {
         self.force_nn
             .filter(|f| self.detected && !self.force_saturated && f.is_finite())
+    }
+
+    /// A detection with the force its angle bends `cantilever` by (through
+    /// `Cantilever::force_nn`, clamped at the model's limit and saying so); without a
+    /// cantilever, or for a miss, the estimate as it is.
+    pub fn with_force(mut self, cantilever: Option<Cantilever>) -> Estimate {
+        if let (true, Some(angle), Some(c)) = (self.detected, self.angle_deg, cantilever) {
+            let force = c.force_nn(angle);
+            self.force_nn = Some(force.value);
+            self.force_saturated = force.saturated;
+        }
+        self
     }
 
     /// One of this estimate's values as every output shows it (the estimate CSV, the

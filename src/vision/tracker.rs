@@ -549,13 +549,11 @@ impl PyramidTracker {
             // Not a verdict on this probe: the runners-up are tried.
             return Estimate::missed(Miss::OtherProbe, 0.0);
         }
-        let angle_deg = screen_deg_from_image_rad(pose.psi);
-        let force = self.cantilever.map(|c| c.force_nn(angle_deg));
         Estimate {
             detected: true,
-            angle_deg: Some(angle_deg),
-            force_nn: force.map(|f| f.value),
-            force_saturated: force.is_some_and(|f| f.saturated),
+            angle_deg: Some(screen_deg_from_image_rad(pose.psi)),
+            force_nn: None,
+            force_saturated: false,
             apex_px: Some(apex),
             edges,
             angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_sigma)),
@@ -563,6 +561,7 @@ impl PyramidTracker {
             confidence,
             miss: None,
         }
+        .with_force(self.cantilever)
     }
 }
 
@@ -683,7 +682,7 @@ impl Tracker {
                 tracker,
                 cantilever,
                 ..
-            } => with_force(tracker.track(frame), *cantilever),
+            } => tracker.track(frame).with_force(*cantilever),
         }
     }
 
@@ -717,16 +716,6 @@ impl Tracker {
             Engine::Rigid { .. } => self.track(frame),
         }
     }
-}
-
-/// A rigid probe's detection with its cantilever's force, when it has one.
-fn with_force(mut estimate: Estimate, cantilever: Option<Cantilever>) -> Estimate {
-    if let (true, Some(angle), Some(c)) = (estimate.detected, estimate.angle_deg, cantilever) {
-        let force = c.force_nn(angle);
-        estimate.force_nn = Some(force.value);
-        estimate.force_saturated = force.saturated;
-    }
-    estimate
 }
 
 #[cfg(test)]

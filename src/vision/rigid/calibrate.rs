@@ -13,6 +13,7 @@ use image::GrayImage;
 use super::station::Stations;
 use super::{RigidEdge, RigidError, RigidTemplate};
 use crate::vision::geometry::{add, along, dot, norm, principal_axis, scale, sub, unit, Line};
+use crate::vision::EdgeName;
 
 /// Spacing of the stations read between and beyond the clicks, pixels.
 const SPACING_PX: f64 = 2.0;
@@ -189,7 +190,7 @@ pub fn calibrate(
                 }
             }
             RigidEdge {
-                name: name.clone(),
+                name: EdgeName::intern(name),
                 normal: n,
                 offset: -f.line.depth(apex_px),
                 extent: [lo, hi],

@@ -18,10 +18,10 @@ use image::GrayImage;
 use nalgebra::{Matrix4, Vector4};
 
 use super::search::SCALES;
-use super::station::Stations;
+use super::station::{Located, Stations};
 use super::{Pose, RigidTemplate};
-use crate::vision::geometry::{dot, rotate, sub};
-use crate::vision::{EdgeName, Miss};
+use crate::vision::geometry::{add, dot, rotate, scale, sub};
+use crate::vision::Miss;
 
 /// Most edges a rigid template may have.
 pub const MAX_EDGES: usize = 8;
@@ -83,7 +83,6 @@ pub struct Seen {
     /// view.
     pub span: [f64; 2],
     pub held: usize,
-    pub stations: usize,
     /// Median step of its stations, grey levels.
     pub step: f64,
 }
@@ -108,6 +107,52 @@ struct Point {
     step: f64,
     /// The step was found (inside the frame); else the station is out of view.
     in_view: bool,
+}
+
+impl Point {
+    /// The reading of a station at `q` (normal `normal`) that found step `f`, over the
+    /// edge's calibrated `step`.
+    fn located(
+        edge: usize,
+        tau: f64,
+        q: [f64; 2],
+        normal: [f64; 2],
+        f: Located,
+        step: f64,
+    ) -> Point {
+        Point {
+            edge,
+            tau,
+            at: add(q, scale(normal, f.t)),
+            step: f.step / step,
+            in_view: true,
+        }
+    }
+}
+
+/// A station's point against its edge at a pose: the residual (signed distance from
+/// the bowed edge), and what its derivatives need: the edge's normal in the frame, the
+/// point from the apex, the edge's depth there in reference pixels.
+struct Against {
+    residual: f64,
+    normal: [f64; 2],
+    from_apex: [f64; 2],
+    depth: f64,
+}
+
+impl Against {
+    fn new(t: &RigidTemplate, pose: &Pose, p: &Point) -> Against {
+        let edge = &t.edges[p.edge % MAX_EDGES];
+        let normal = rotate(edge.normal, pose.psi);
+        let from_apex = sub(p.at, pose.apex);
+        let depth = edge.offset + edge.bow_at(p.tau);
+        Against {
+            residual: dot(normal, from_apex) - pose.scale * depth,
+            normal,
+            from_apex,
+            depth,
+        }
+    }
 }
 
 /// Fits poses; keeps its buffers between calls.
@@ -194,13 +239,7 @@ impl Fitter {
                 let q = pose.place(edge, tau);
                 let found = self.stations.locate(frame, q, normal, edge.polarity, reach);
                 self.points.push(match found {
-                    Some(f) => Point {
-                        edge: e,
-                        tau,
-                        at: [q[0] + normal[0] * f.t, q[1] + normal[1] * f.t],
-                        step: f.step / edge.step,
-                        in_view: true,
-                    },
+                    Some(f) => Point::located(e, tau, q, normal, f, edge.step),
                     None => Point {
                         edge: e,
                         tau,
@@ -221,13 +260,14 @@ impl Fitter {
                     let tau = edge.extent[end] + sign * d / pose.scale;
                     let q = pose.place(edge, tau);
                     if let Some(f) = self.stations.locate(frame, q, normal, edge.polarity, reach) {
-                        self.points.push(Point {
-                            edge: MAX_EDGES + e,
+                        self.points.push(Point::located(
+                            MAX_EDGES + e,
                             tau,
-                            at: [q[0] + normal[0] * f.t, q[1] + normal[1] * f.t],
-                            step: f.step / edge.step,
-                            in_view: true,
-                        });
+                            q,
+                            normal,
+                            f,
+                            edge.step,
+                        ));
                     }
                 }
             }
@@ -236,9 +276,7 @@ impl Fitter {
 
     /// Signed distance of a station's point from its edge's line at `pose`.
     fn residual(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
-        let edge = &t.edges[p.edge % MAX_EDGES];
-        let normal = rotate(edge.normal, pose.psi);
-        dot(normal, sub(p.at, pose.apex)) - pose.scale * (edge.offset + edge.bow_at(p.tau))
+        Against::new(t, pose, p).residual
     }
 
     /// Stations stepping as their edge does (before the fit has converged: wherever
@@ -273,11 +311,12 @@ impl Fitter {
             if !(p.in_view && p.step >= FIT_SHARE) {
                 continue;
             }
-            let edge = &t.edges[p.edge];
-            let normal = rotate(edge.normal, pose.psi);
-            let d = sub(p.at, pose.apex);
-            let depth = edge.offset + edge.bow_at(p.tau);
-            let r = dot(normal, d) - pose.scale * depth;
+            let Against {
+                residual: r,
+                normal,
+                from_apex: d,
+                depth,
+            } = Against::new(t, pose, p);
             let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
             let j = Vector4::new(
                 -normal[1] * d[0] + normal[0] * d[1],
@@ -347,7 +386,7 @@ impl Fitter {
             let is_apex_edge = t.apex_edges.contains(&e);
             if in_view < MIN_IN_VIEW.min(total) || (in_view as f64) < IN_VIEW_SHARE * total as f64 {
                 if is_apex_edge && refusal.is_none() {
-                    refusal = Some(Miss::EdgeMissing(EdgeName::intern(&edge.name)));
+                    refusal = Some(Miss::EdgeMissing(edge.name));
                 }
                 continue;
             }
@@ -359,21 +398,19 @@ impl Fitter {
             edges[e] = Some(Seen {
                 span,
                 held,
-                stations: in_view,
                 step: median_ratio * edge.step,
             });
             if refusal.is_some() {
                 continue;
             }
-            let name = || EdgeName::intern(&edge.name);
             if median_ratio < 0.0 {
-                refusal = Some(Miss::WrongAppearance(name()));
+                refusal = Some(Miss::WrongAppearance(edge.name));
             } else if share < HELD_SHARE {
-                refusal = Some(Miss::EdgeMissing(name()));
+                refusal = Some(Miss::EdgeMissing(edge.name));
             } else if median_ratio < MIN_STEP_RATIO {
-                refusal = Some(Miss::WrongAppearance(name()));
+                refusal = Some(Miss::WrongAppearance(edge.name));
             } else if is_apex_edge && !self.apex_held(t, &pose, e) {
-                refusal = Some(Miss::EdgeMissing(name()));
+                refusal = Some(Miss::EdgeMissing(edge.name));
             } else if self.runs_on(t, &pose, e) {
                 refusal = Some(Miss::ScaleMismatch);
             }

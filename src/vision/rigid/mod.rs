@@ -26,14 +26,15 @@ pub use fit::MAX_EDGES;
 
 use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
 use super::pyramid::Pyramid;
-use super::{EdgeFit, Estimate, Miss};
+use super::{EdgeFit, EdgeName, Estimate, Miss};
 use fit::{Fit, Fitter};
 use search::Search;
 
 /// One named edge of a rigid probe, in the reference image, relative to the apex.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RigidEdge {
-    pub name: String,
+    /// Its name, as refusals give it.
+    pub name: EdgeName,
     /// Unit normal pointing into the probe.
     pub normal: [f64; 2],
     /// Signed distance of the line from the apex: `normal . (p - apex)` on it.
