@@ -8,7 +8,8 @@
 //! another geometry, the probe with its tip under an occluding patch
 //! (`nanoforce::scene::adversarial`), and sub-windows of real SEM frames
 //! (`tests/data/real-sem`). The checked-in seed is a held-out one: the checks were
-//! developed on another (`ADVERSARIAL_SEED=n` runs any). Run with
+//! developed on another (`ADVERSARIAL_SEED=n` runs any; `ADVERSARIAL_DUMP=dir` writes
+//! each falsely detected frame into dir). Run with
 //! `cargo test --release --test tracker_adversarial -- --nocapture`.
 mod tracker_support;
 
@@ -45,7 +46,7 @@ impl Tally {
                 e.angle_deg, e.apex_px, e.scale, e.confidence
             ));
         }
-        let reason = e.miss.map_or("detected".to_string(), |m| format!("{m:?}"));
+        let reason = e.miss.map_or("detected", |m| m.name()).to_string();
         *self.reasons.entry(reason).or_default() += 1;
     }
 }
@@ -56,6 +57,8 @@ fn run(seed: u64) -> BTreeMap<&'static str, Tally> {
     let mut adversary = Adversary::new();
     let mut frame = GrayImage::new(1, 1);
     let mut tallies: BTreeMap<&'static str, Tally> = BTreeMap::new();
+    // ADVERSARIAL_DUMP=dir writes each falsely detected frame there, to look at.
+    let dump = std::env::var("ADVERSARIAL_DUMP").ok();
     for (i, session) in sessions.iter().enumerate() {
         let mut tracker: Tracker = rendered::tracker(session, false);
         for decoy in Decoy::ALL {
@@ -67,6 +70,12 @@ fn run(seed: u64) -> BTreeMap<&'static str, Tally> {
                     "session {i} frame {k} ({} {}x {:.1} deg)",
                     spec.look.style_name, spec.magnification, spec.angle_deg
                 );
+                if let (true, Some(dir)) = (e.detected, &dump) {
+                    let name = format!("{}-s{i}-f{k}.png", decoy.name());
+                    nanoforce::vision::draw_overlay(&frame, &e)
+                        .save(std::path::Path::new(dir).join(name))
+                        .unwrap();
+                }
                 tallies.entry(decoy.name()).or_default().add(what, &e);
             }
         }
@@ -103,14 +112,15 @@ fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
 
 /// False detections per kind measured on the held-out seed 2027 (1080 frames) with the
 /// per-edge checks (docs/tracker.md, "What the tracker refuses, and why"). The goal is
-/// none on any kind; what remains is mostly a thicker beam whose faces' ends cannot
-/// both be measured and a mirrored probe with its beam out of view. These bounds
+/// none on any kind; what remains is a mirrored probe with its beam out of view, a tip
+/// under a patch, a thicker beam placed from its faces alone and one random shape.
+/// These bounds
 /// catch a regression, and a kind that reaches zero stays there.
 const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
     ("mirrored", 2),
     ("occluded", 1),
-    ("other-probe", 3),
+    ("other-probe", 1),
     ("real-sem", 0),
     ("shapes", 1),
 ];

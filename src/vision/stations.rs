@@ -480,6 +480,11 @@ pub fn check_edges(
     {
         return Some(miss);
     }
+    if let Some(miss) =
+        beam_edge.and_then(|red| free_end(frame, t, pose, &red, &s, calibrated[RED]))
+    {
+        return Some(miss);
+    }
     // Last, as the dearest: a face the frame shows turned from its prediction.
     for (e, face) in faces.iter().enumerate() {
         if let Some((span, p, partner)) = face {
@@ -810,9 +815,209 @@ fn lower_face(
     None
 }
 
+/// How far inside the true free end calibration places it, as a share of the tip
+/// height: it follows the beam edge until its step fades into the corner (measured on
+/// rendered references: up to 3.2 %).
+const FREE_END_SHORT: f64 = 0.05;
+/// The free end, and a station of the overhang, show the probe's step from this share
+/// of the beam edge's calibrated step (genuine overhangs step by about 0.4 of it, the
+/// overhang of a beam of another thickness by 0.15 at most).
+const END_RATIO: f64 = 0.2;
+/// Fewer stations than this (of [`STATIONS`]) showing the overhang's step leave it to
+/// the end face below it to tell a beam of another thickness.
+const OVERHANG_SHOWN: usize = 3;
+/// Shortest stretch of the overhang that is checked, pixels.
+const MIN_OVERHANG_PX: f64 = 4.0;
+/// Half width of the runs either side of a candidate end face, pixels.
+const END_RUN_PX: usize = 3;
+/// Rows of the beam's band averaged at each position of the end face's search.
+const END_ROWS: usize = 6;
+/// Longest search for the end face, pixels either way (the samples live on the stack).
+const END_SEARCH_MAX: usize = 120;
+
+/// The block's free end, where a beam of another thickness shows even with the back
+/// face's base out of view. The rigid block ends a short overhang beyond the front
+/// face's base. With the beam edge found (the scale, hence the lower face's depth,
+/// known to a pixel) and the free end located in the frame near where the pose puts
+/// it ([`locate_end`]), a thicker beam shows twice: the overhang's lower face, from
+/// where the front face's line meets it to the free end, steps on fewer than
+/// [`OVERHANG_SHOWN`] stations (the beam lies on both sides of it), and the end face's
+/// step carries on below the corner, over the next beam thickness, on [`HELD_SHARE`]
+/// of its stations. Refused as `Miss::ScaleMismatch` when both hold: a particle at
+/// the probe's level at the free end hides the overhang and steps beside the end
+/// face's line, but not along that much of it. The free end itself is not refused
+/// when its step is missing: a bright textured background beyond it takes the step
+/// away as often as a beam running on.
+fn free_end(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    red: &Line,
+    s: &Sampling,
+    red_step: f64,
+) -> Option<Miss> {
+    let (tip, far) = t.segment(pose, RED);
+    let len = norm(sub(tip, far));
+    if len < 1e-9 {
+        return None;
+    }
+    // Along the beam, out of its free end.
+    let out = [(tip[0] - far[0]) / len, (tip[1] - far[1]) / len];
+    let free = red.foot(tip);
+    let beam_px = t.beam_px? * pose.scale;
+    let depths = (s.margin_px, beam_px - s.margin_px);
+    if depths.1 - depths.0 < 1.0 {
+        return None;
+    }
+    let reach = FREE_END_SHORT * t.height * pose.scale + 2.0;
+    let (at, step) = locate_end(frame, red, free, out, depths, reach, red_step)?;
+    if step < END_RATIO {
+        return None;
+    }
+    // The overhang, long enough to keep the pyramid clear of the samples behind the
+    // end face's line.
+    let lower = Line::through(
+        add(free, scale(red.normal, beam_px)),
+        [-red.normal[0], -red.normal[1]],
+    );
+    let base = lower.intersect(&t.line(pose, GREEN))?;
+    let end = add(free, scale(out, at));
+    let overhang = dot(sub(end, base), out);
+    let sampling = Sampling {
+        inside_px: 3.0,
+        ..*s
+    };
+    if overhang < sampling.reach() + 2.0 {
+        return None;
+    }
+    // The overhang's lower face, from where the front face's line meets it to the end.
+    let (a0, b0) = (2.0, overhang - 2.0);
+    if b0 - a0 < MIN_OVERHANG_PX {
+        return None;
+    }
+    let p = profile(
+        frame,
+        &lower,
+        (add(base, scale(out, a0)), add(base, scale(out, b0))),
+        None,
+        &Sampling {
+            inside_px: (beam_px - 2.0 * s.margin_px).clamp(1.0, 3.0),
+            ..*s
+        },
+        red_step,
+    );
+    let shown = |p: &Profile| (0..p.stations).filter(|&k| p.ratio[k] >= END_RATIO).count();
+    if p.stations < STATIONS || shown(&p) >= OVERHANG_SHOWN {
+        return None;
+    }
+    // Below the block's corner, along the end face's line: the surroundings on both
+    // sides for this probe, the rest of the end face for a thicker beam.
+    let face = Line::through(end, [-out[0], -out[1]]);
+    let (a, b) = (beam_px + s.margin_px + 2.0, 2.0 * beam_px);
+    let size = [frame.width() as f64, frame.height() as f64];
+    let (c0, c1) = clip_inside(end, red.normal, size, sampling.reach() + 1.0)?;
+    let (a0, b0) = (a.max(c0), b.min(c1));
+    if b0 - a0 < MIN_CHECKED_PX {
+        return None;
+    }
+    let q = profile(
+        frame,
+        &face,
+        (
+            add(end, scale(red.normal, a0)),
+            add(end, scale(red.normal, b0)),
+        ),
+        None,
+        &sampling,
+        red_step,
+    );
+    (q.stations == STATIONS && shown(&q) as f64 >= HELD_SHARE * STATIONS as f64)
+        .then_some(Miss::ScaleMismatch)
+}
+
+/// Where the beam's band (`depths` below `red`) steps from the probe to the
+/// surroundings along `out`, within `reach` of `free`: the position (pixels along `out`
+/// from `free`) of the largest step between runs of [`END_RUN_PX`] either side, and
+/// that step over the calibrated one. `None` when the band leaves the frame there.
+fn locate_end(
+    frame: &GrayImage,
+    red: &Line,
+    free: [f64; 2],
+    out: [f64; 2],
+    depths: (f64, f64),
+    reach: f64,
+    red_step: f64,
+) -> Option<(f64, f64)> {
+    let half = (reach.ceil() as usize).min(END_SEARCH_MAX);
+    let n = 2 * (half + END_RUN_PX) + 1;
+    let mut level = [0.0; 2 * (END_SEARCH_MAX + END_RUN_PX) + 1];
+    // At most END_ROWS rows, evenly over the band.
+    let rows = (0..END_ROWS)
+        .map(|r| depths.0 + (depths.1 - depths.0) * (r as f64 + 0.5) / END_ROWS as f64);
+    let count = END_ROWS as f64;
+    for (i, v) in level[..n].iter_mut().enumerate() {
+        let x = i as f64 - (half + END_RUN_PX) as f64;
+        let mut sum = 0.0;
+        for d in rows.clone() {
+            let p = add(free, add(scale(out, x), scale(red.normal, d)));
+            sum += grey(frame, p)?;
+        }
+        *v = sum / count;
+    }
+    let cal = unit_step(red_step);
+    let run = END_RUN_PX as f64;
+    let mut best = (0.0, f64::NEG_INFINITY);
+    for i in END_RUN_PX..n - END_RUN_PX {
+        let before: f64 = level[i - END_RUN_PX..i].iter().sum::<f64>() / run;
+        let after: f64 = level[i + 1..=i + END_RUN_PX].iter().sum::<f64>() / run;
+        let ratio = (before - after) / cal;
+        if ratio > best.1 {
+            best = (i as f64 - (half + END_RUN_PX) as f64, ratio);
+        }
+    }
+    Some(best)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_free_end_is_located_where_the_beam_stops() {
+        // A beam (200) from the left edge to x = 100 between y = 50 and 70, on 50.
+        let frame = GrayImage::from_fn(200, 120, |x, y| {
+            image::Luma([if x <= 100 && (50..=70).contains(&y) {
+                200
+            } else {
+                50
+            }])
+        });
+        let red = Line::through([0.0, 50.0], [0.0, 1.0]);
+        let (at, ratio) = locate_end(
+            &frame,
+            &red,
+            [94.0, 50.0],
+            [1.0, 0.0],
+            (2.0, 18.0),
+            10.0,
+            150.0,
+        )
+        .unwrap();
+        // The beam's last pixel (x = 100); the first dark one ties with it.
+        assert_eq!(at, 6.0);
+        assert!((ratio - 1.0).abs() < 1e-9, "{ratio}");
+        // Half of the band beyond the frame: not judged.
+        assert!(locate_end(
+            &frame,
+            &red,
+            [194.0, 50.0],
+            [1.0, 0.0],
+            (2.0, 18.0),
+            10.0,
+            150.0
+        )
+        .is_none());
+    }
 
     /// A frame bright (200) right of the vertical line x = 100, dark (50) left of it.
     fn half_plane() -> GrayImage {
