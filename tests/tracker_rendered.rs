@@ -204,10 +204,10 @@ fn a_substrate_beside_part_of_a_face_does_not_lean_it() {
     // Suite 31, session 1, frame 38 (harsh, 1578x): the apex dips into the substrate,
     // whose edge crosses both faces a few dozen pixels up, so each face has the bright
     // substrate outside one part and the dark background outside the rest. A single
-    // outside level (with a slope) along the face cannot follow that step, and the
-    // misfit leaned the tip: 0.046 deg off with the noise turned off (0.011 without
-    // the substrate), 0.265 deg with it on (the suite's worst frame then). Each stretch
-    // of a band now has its own outside level.
+    // outside level (with a slope) along the face cannot follow that step, and its
+    // misfit leans the tip: 0.046 deg off with the noise turned off (0.011 without the
+    // substrate), 0.265 deg with it on. Each stretch of a band has its own outside
+    // level, which this checks.
     let session = &scene::suite(31, 12, 50)[1];
     let mut tracker = rendered::tracker(session, false);
     let mut spec = session.frames[38];
@@ -233,8 +233,8 @@ fn a_substrate_beside_part_of_a_face_does_not_lean_it() {
 fn harsh_faces_broken_up_on_the_edge_map_are_still_detected() {
     // Harsh frames at high magnification (suite 1: session 6 frame 1 at 7466x, session 9
     // frame 46 at 5640x): Canny on the binned image covers only 52-56 % of the faces,
-    // while the grey-level fit holds them (0.67-0.70 of the calibrated contrast). With
-    // coverage counting fully only from 65 % they were missed (confidence 0.49).
+    // while the grey-level fit holds them (0.67-0.70 of the calibrated contrast).
+    // Coverage counted fully only from 65 % would miss them (confidence 0.49).
     let sessions = scene::suite(1, 12, 50);
     for (s, f) in [(6, 1), (9, 46)] {
         let session = &sessions[s];
