@@ -42,7 +42,7 @@ fn suite_of_600_frames_over_real_backgrounds() {
             let real = look.real.expect("a real background");
             println!(
                 "s{:02} f{:02} in view {} mag {:5.0}: contrast {:+5.1} noise {:4.1} texture {:4.1} \
-                 level {:5.1} gain {:.2} jitter {:.2} needle {} -> conf {:.2} miss {:?}",
+                 level {:5.1} gain {:.2} jitter {:.2} needle {} -> conf {:.2} miss {}",
                 i / 50,
                 i % 50,
                 ti.detected,
@@ -55,7 +55,7 @@ fn suite_of_600_frames_over_real_backgrounds() {
                 look.jitter_fraction,
                 look.needle.is_some(),
                 ei.confidence,
-                ei.miss
+                ei.miss.map_or("none", |m| m.name())
             );
         }
     }
