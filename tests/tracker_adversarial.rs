@@ -7,9 +7,10 @@
 //! random bright and dark shapes, the session's probe mirrored left-right, probes of
 //! another geometry, the probe with its tip under an occluding patch
 //! (`nanoforce::scene::adversarial`), and sub-windows of real SEM frames
-//! (`tests/data/real-sem`). The checked-in seed is a held-out one: the checks were
-//! developed on another (`ADVERSARIAL_SEED=n` runs any; `ADVERSARIAL_DUMP=dir` writes
-//! each falsely detected frame into dir). Run with
+//! (`tests/data/real-sem`). The checked-in seeds are a held-out one (2027) and a harder
+//! one (4242) measured after the checks were developed on another
+//! (`ADVERSARIAL_SEED=n` runs any, unchecked; `ADVERSARIAL_DUMP=dir` writes each
+//! falsely detected frame into dir). Run with
 //! `cargo test --release --test tracker_adversarial -- --nocapture`.
 mod tracker_support;
 
@@ -114,8 +115,7 @@ fn report(tallies: &BTreeMap<&'static str, Tally>) -> String {
 /// per-edge checks (docs/tracker.md, "What the tracker refuses, and why"). The goal is
 /// none on any kind; what remains is a mirrored probe with its beam out of view, a tip
 /// under a patch, a thicker beam placed from its faces alone and one random shape.
-/// These bounds
-/// catch a regression, and a kind that reaches zero stays there.
+/// These bounds catch a regression, and a kind that reaches zero stays there.
 const MEASURED: [(&str, usize); 6] = [
     ("clutter", 0),
     ("mirrored", 2),
@@ -125,25 +125,49 @@ const MEASURED: [(&str, usize); 6] = [
     ("shapes", 1),
 ];
 
-#[test]
-fn false_detections_without_the_probe_stay_within_the_measured_bounds() {
-    let seed = std::env::var("ADVERSARIAL_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(2027);
+/// The same on seed 4242, one of the harder seeds (19 of 1080 frames detected against
+/// 2027's 5): the held-out seed alone would let a regression on the kinds it rarely
+/// draws go unseen.
+const MEASURED_4242: [(&str, usize); 6] = [
+    ("clutter", 0),
+    ("mirrored", 3),
+    ("occluded", 4),
+    ("other-probe", 12),
+    ("real-sem", 0),
+    ("shapes", 0),
+];
+
+/// Runs the suite of `seed` and checks it against `bounds` (none when `None`).
+fn check(seed: u64, bounds: Option<&[(&str, usize)]>) {
     let tallies = run(seed);
     let why = report(&tallies);
     println!("seed {seed}\n{why}");
     let frames: usize = tallies.values().map(|t| t.frames).sum();
     assert!(frames >= 1000, "{frames} frames");
     assert_eq!(tallies.len(), Decoy::ALL.len() + 1, "{why}");
-    if seed != 2027 {
-        return;
-    }
-    for (kind, bound) in MEASURED {
+    for &(kind, bound) in bounds.unwrap_or_default() {
         let found = tallies.get(kind).map_or(usize::MAX, |t| t.detected.len());
-        assert!(found <= bound, "{kind}: {found} > {bound}\n{why}");
+        assert!(
+            found <= bound,
+            "seed {seed}, {kind}: {found} > {bound}\n{why}"
+        );
     }
+}
+
+#[test]
+fn false_detections_without_the_probe_stay_within_the_measured_bounds() {
+    match std::env::var("ADVERSARIAL_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        Some(seed) => check(seed, None),
+        None => check(2027, Some(&MEASURED)),
+    }
+}
+
+#[test]
+fn false_detections_on_a_harder_seed_stay_within_the_measured_bounds() {
+    check(4242, Some(&MEASURED_4242));
 }
 
 #[test]
