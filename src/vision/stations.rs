@@ -780,22 +780,9 @@ fn lower_face(
         return None;
     }
     let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
-    let base = t.segment(pose, BLUE).1;
-    // The base's foot on the lower face.
-    let drop = beam_px - red.depth(base);
-    let foot = [
-        base[0] + drop * red.normal[0],
-        base[1] + drop * red.normal[1],
-    ];
-    let normal = [-red.normal[0], -red.normal[1]];
-    let line = Line {
-        normal,
-        rho: normal[0] * foot[0] + normal[1] * foot[1],
-    };
-    let sampling = Sampling {
-        inside_px: (beam_px - 2.0 * s.margin_px).clamp(1.0, 3.0),
-        ..*s
-    };
+    let (line, sampling) = lower_face_line(red, beam_px, s);
+    // The back face's base's foot on the lower face.
+    let foot = line.foot(t.segment(pose, BLUE).1);
     let pad = sampling.reach() + 1.0;
     let size = [frame.width() as f64, frame.height() as f64];
     let (a, b) = clip_inside(foot, dir, size, pad)?;
@@ -813,6 +800,22 @@ fn lower_face(
         return Some(Miss::ScaleMismatch);
     }
     None
+}
+
+/// The beam's lower face, `beam_px` below the beam edge `red` and parallel to it (its
+/// inward normal up into the beam), and the sampling whose inside runs stay within
+/// the beam.
+fn lower_face_line(red: &Line, beam_px: f64, s: &Sampling) -> (Line, Sampling) {
+    let normal = [-red.normal[0], -red.normal[1]];
+    let line = Line {
+        normal,
+        rho: -(red.rho + beam_px),
+    };
+    let sampling = Sampling {
+        inside_px: (beam_px - 2.0 * s.margin_px).clamp(1.0, 3.0),
+        ..*s
+    };
+    (line, sampling)
 }
 
 /// How far inside the true free end calibration places it, as a share of the tip
@@ -876,10 +879,7 @@ fn free_end(
     }
     // The overhang, long enough to keep the pyramid clear of the samples behind the
     // end face's line.
-    let lower = Line::through(
-        add(free, scale(red.normal, beam_px)),
-        [-red.normal[0], -red.normal[1]],
-    );
+    let (lower, lower_sampling) = lower_face_line(red, beam_px, s);
     let base = lower.intersect(&t.line(pose, GREEN))?;
     let end = add(free, scale(out, at));
     let overhang = dot(sub(end, base), out);
@@ -900,10 +900,7 @@ fn free_end(
         &lower,
         (add(base, scale(out, a0)), add(base, scale(out, b0))),
         None,
-        &Sampling {
-            inside_px: (beam_px - 2.0 * s.margin_px).clamp(1.0, 3.0),
-            ..*s
-        },
+        &lower_sampling,
         red_step,
     );
     let shown = |p: &Profile| (0..p.stations).filter(|&k| p.ratio[k] >= END_RATIO).count();
