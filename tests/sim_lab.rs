@@ -32,7 +32,7 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
     assert_eq!(f.detected, f.tracked, "the probe is always in view: {f:?}");
     assert_eq!(s.safety.faults, 0);
     // No stale event while frames stream steadily (as in `frame_rate_case`).
-    if f.dropped == 0 && s.haptic_loop.rate_hz > 990.0 {
+    if streamed_steadily(&s) {
         assert_eq!(s.safety.stale_events, 0, "{:?}", s.safety);
     } else {
         eprintln!("stale events not checked: the host stalled the run");
@@ -45,6 +45,13 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
     assert_timing_targets(&s, steal, realtime);
 }
 
+/// Whether frames streamed steadily through the run: every frame tracked and the
+/// haptic loop on time. A host that stalls the run (as when the machine is busy with
+/// other work) drops frames and slows the loop below 990 Hz.
+fn streamed_steadily(s: &RunStats) -> bool {
+    s.frames.dropped == 0 && s.haptic_loop.rate_hz > 990.0
+}
+
 /// Runs `config` for 12 s as `one_twelve_second_run` does, and once more when the host
 /// stalled the first run (frames dropped, or the haptic loop off its 1 kHz: a SCHED_FIFO
 /// thread on a virtual machine misses wake-ups by milliseconds when the host takes the
@@ -53,10 +60,7 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
 fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
     let run = one_twelve_second_run(config);
     let s = &run.0;
-    let steady = s.frames.dropped == 0
-        && s.haptic_loop.rate_hz > 990.0
-        && s.haptic_loop.period_us_p99.is_some_and(|p99| p99 <= 1100.0);
-    if steady {
+    if streamed_steadily(s) && s.haptic_loop.period_us_p99.is_some_and(|p99| p99 <= 1100.0) {
         return run;
     }
     eprintln!("the host stalled the run, running it again");
@@ -226,9 +230,8 @@ fn frame_rate_case(rate_hz: f64, delay_ms: f64) {
     // and then a stale event is the daemon doing its job, and the scripted press may
     // not be reached in the short run. Such a run measures the host, so it is run once
     // more.
-    let steady = |s: &RunStats| s.frames.dropped == 0 && s.haptic_loop.rate_hz > 990.0;
     let mut s = run(&short_lab(rate_hz, delay_ms), 7.0);
-    if !steady(&s) {
+    if !streamed_steadily(&s) {
         eprintln!(
             "the host stalled the run ({}), running it again",
             serde_json::to_string(&s).unwrap()
@@ -240,8 +243,7 @@ fn frame_rate_case(rate_hz: f64, delay_ms: f64) {
         serde_json::to_string(&s).unwrap()
     );
     assert_force_targets(&s.force, 1700.0, "~2 uN");
-    let steady = steady(&s);
-    if steady {
+    if streamed_steadily(&s) {
         assert_eq!(
             s.safety.stale_events, 0,
             "frames stream steadily: {:?}",
