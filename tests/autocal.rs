@@ -8,7 +8,7 @@ mod tracker_support;
 
 use nanoforce::config::TrackerConfig;
 use nanoforce::scene::{self, render};
-use nanoforce::vision::{auto_calibrate, Calibration, Edge, Tracker};
+use nanoforce::vision::{auto_calibrate, Calibration, Edge, Estimate, Tracker};
 use tracker_support::{rendered, score};
 
 /// Sessions of the check: six setups (alternating entry sides, every third
@@ -172,17 +172,46 @@ fn auto_calibration_over_real_backgrounds_reads_and_tracks_as_hand_clicks_do() {
     let hand = score(&truths, &hand_e);
     let auto = score(&truths, &auto_e);
     println!("hand clicks: {hand:?}\nautomatic:   {auto:?}");
+    // The angles are compared frame by frame, on the frames both calibrations
+    // detect: a frame one of them alone detects is one of the harder ones, and the
+    // median of one set of errors against another's moves by its own standard error
+    // (about 0.002 deg here) with every frame added.
+    let both: Vec<usize> = (0..truths.len())
+        .filter(|&i| hand_e[i].detected && auto_e[i].detected)
+        .collect();
+    let error =
+        |e: &Estimate, i: usize| (e.angle_deg.unwrap_or(f64::NAN) - truths[i].angle_deg).abs();
+    let mut worse: Vec<f64> = both
+        .iter()
+        .map(|&i| error(&auto_e[i], i) - error(&hand_e[i], i))
+        .collect();
+    worse.sort_by(f64::total_cmp);
+    let median_worse = worse[worse.len() / 2];
+    let on_both = |e: &[Estimate]| {
+        let t: Vec<_> = both.iter().map(|&i| truths[i].clone()).collect();
+        let e: Vec<_> = both.iter().map(|&i| e[i]).collect();
+        score(&t, &e)
+    };
+    let (hand_both, auto_both) = (on_both(&hand_e), on_both(&auto_e));
+    println!(
+        "on the {} frames both detect: automatic error minus hand clicks' median \
+         {median_worse:.4} deg; p95 {:.3} against {:.3} deg",
+        both.len(),
+        auto_both.angle_err_p95_deg,
+        hand_both.angle_err_p95_deg
+    );
     // Measured: all 12 references calibrate, of either polarity, within 0.003-0.094
     // deg of the hand clicks (each within 3 standard errors of a difference; session
     // 1, a dark probe over bright texture found on the rays from the apex, 0.041 of
-    // 0.205 allowed); the tracked frames score as with hand clicks (median 0.0275
-    // against 0.0259 deg, p95 0.222 against 0.245, detection equal).
+    // 0.205 allowed); both calibrations detect 551 frames; on the 550 both detect,
+    // the automatic calibration's error is the hand clicks' frame by frame (median
+    // difference 0.0000 deg), p95 0.210 against 0.245 deg.
     assert!(failed.is_empty(), "sessions {failed:?} not calibrated");
     assert!(auto.detect_rate >= hand.detect_rate - 0.005, "{auto:?}");
     assert!(auto.false_detections <= hand.false_detections, "{auto:?}");
     assert!(
-        auto.angle_err_median_deg <= hand.angle_err_median_deg + 0.002,
-        "{auto:?} against {hand:?}"
+        median_worse <= 0.002,
+        "automatic error exceeds the hand clicks' by {median_worse} deg (median)"
     );
-    assert!(auto.angle_err_p95_deg <= hand.angle_err_p95_deg + 0.01);
+    assert!(auto_both.angle_err_p95_deg <= hand_both.angle_err_p95_deg + 0.01);
 }
