@@ -8,7 +8,11 @@
 //! - `probes/<size>/<n>-of-<count>`: two probes at 640x480 and four at 1024x768 in
 //!   one view, and the first of them alone on the same frames;
 //! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
-//!   jaw), each frame searched whole, over eight frames of its tool suite.
+//!   jaw), each frame searched whole, over eight frames of its tool suite;
+//! - `realbg/faded-faces`: the 50 frames of a real-background session whose faces
+//!   fade into a bright textured ground under noise 30-48 (`scene::real_suite` seed
+//!   13, session 10), per frame: the frames where the scale is found from the beam
+//!   edge itself.
 //!
 //! `cargo bench --bench tracker`; docs/tracker.md records the numbers.
 use std::path::Path;
@@ -201,12 +205,61 @@ fn bench_rigid(c: &mut Criterion) {
     }
 }
 
+/// The real SEM crops of `tests/data/real-sem`, in name order.
+fn real_crops() -> Vec<GrayImage> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real-sem");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .expect("tests/data/real-sem")
+        .map(|e| e.expect("a directory entry").path())
+        .filter(|p| p.extension().is_some_and(|x| x == "png"))
+        .collect();
+    paths.sort();
+    paths
+        .iter()
+        .map(|p| image::open(p).expect("a crop").to_luma8())
+        .collect()
+}
+
+/// `realbg/faded-faces`: a whole real-background session, per frame.
+fn bench_realbg(c: &mut Criterion) {
+    let mut group = c.benchmark_group("realbg");
+    let crops = real_crops();
+    let session = &scene::real_suite(13, 12, 50, crops.len())[10];
+    let cfg = session.tracker_config_of(0);
+    let mut reference = GrayImage::new(1, 1);
+    scene::render_over_into(&session.reference, &crops, &mut reference);
+    let cal =
+        Calibration::from_reference(&reference, cfg.calibration.as_ref().expect("clicks"), &cfg)
+            .expect("the reference calibrates");
+    let mut tracker = Tracker::new(&cfg, cal, Some(session.probe().cantilever()));
+    tracker.set_coherence(false);
+    let frames: Vec<GrayImage> = session
+        .frames
+        .iter()
+        .map(|spec| {
+            let mut frame = GrayImage::new(1, 1);
+            scene::render_over_into(spec, &crops, &mut frame);
+            frame
+        })
+        .collect();
+    group.throughput(Throughput::Elements(frames.len() as u64));
+    group.bench_function("faded-faces", |b| {
+        b.iter(|| {
+            for f in &frames {
+                tracker.track(f);
+            }
+        })
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
     bench_sizes,
     bench_window,
     bench_clutter,
     bench_probes,
-    bench_rigid
+    bench_rigid,
+    bench_realbg
 );
 criterion_main!(benches);

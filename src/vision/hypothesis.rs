@@ -423,6 +423,26 @@ fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
     h.score = best;
 }
 
+/// Hypothesis `h` placed at another `scale` (detection pixels per reference pixel),
+/// along its plateau for a pair. The edges it left out are given no coverage: they
+/// were found on the frame, where the edge map did not show them.
+pub fn rescaled(h: &Hypothesis, scale: f64) -> Hypothesis {
+    let mut out = *h;
+    out.pose.scale = scale;
+    if let Some(p) = h.plateau {
+        out.pose.apex = [
+            p.apex0[0] + scale * p.apex1[0],
+            p.apex0[1] + scale * p.apex1[1],
+        ];
+    }
+    for (cov, member) in out.coverage.iter_mut().zip(h.members) {
+        if member.is_none() {
+            *cov = Coverage::default();
+        }
+    }
+    out
+}
+
 /// Whether a pose could be a tip in this image: big enough to see, and with its apex
 /// no further outside the image than the image is large.
 fn plausible(t: &Template, pose: &Pose, size: [f64; 2]) -> bool {

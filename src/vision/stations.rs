@@ -496,6 +496,97 @@ pub fn check_edges(
     None
 }
 
+/// A beam edge looked for over every scale ([`beam_edge_scale`]) is taken where its
+/// median step is at least this share of the calibrated one.
+const FOUND_RATIO: f64 = 0.5;
+/// That search first tries every this many pixels of the beam edge's distance from
+/// the apex, and every pixel around those whose median step reaches [`SCAN_RATIO`].
+const SCAN_STEP_PX: i64 = 5;
+const SCAN_RATIO: f64 = 0.3;
+
+/// The scale at which the frame shows the beam edge, for a tip the fit placed from
+/// its two faces alone and refused there: the faces fix the apex and the rotation,
+/// and the scale only moves the beam edge parallel to itself, away from the apex.
+/// When the faces fade into a bright background before their bases, their visible
+/// length says little of the scale, and the beam edge may lie anywhere its line
+/// crosses the frame. Every pixel of that distance is tried, with the free end in
+/// view: the line is taken where it passes the beam edge's own checks
+/// ([`Profile::refusal`]) with the largest median step, at least [`FOUND_RATIO`] of
+/// the calibrated one. The caller fits and verifies the tip again at that scale;
+/// nothing is accepted here.
+pub fn beam_edge_scale(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    blur_px: f64,
+    red_step: f64,
+) -> Option<f64> {
+    let size = [frame.width() as f64, frame.height() as f64];
+    // The beam edge's distance from the apex per unit of scale.
+    let per_scale = t.edges[RED].offset.abs();
+    if per_scale < 1e-9 {
+        return None;
+    }
+    let unit = Pose {
+        scale: 1.0,
+        ..*pose
+    };
+    let away = t.line(&unit, RED);
+    // The farthest the line can lie from the apex and still cross the frame.
+    let corners = [
+        [0.0, 0.0],
+        [size[0] - 1.0, 0.0],
+        [0.0, size[1] - 1.0],
+        [size[0] - 1.0, size[1] - 1.0],
+    ];
+    let sign = away.depth(pose.apex).signum();
+    let farthest = corners
+        .iter()
+        .map(|&c| -sign * (away.depth(c) - away.depth(pose.apex)))
+        .fold(0.0, f64::max);
+    // The line's profile at `d` pixels from the apex, with the free end in view.
+    let at_depth = |d: i64| -> Option<(f64, Profile)> {
+        let at = Pose {
+            scale: d as f64 / per_scale,
+            ..*pose
+        };
+        let red = t.line(&at, RED);
+        let s = Sampling::new(blur_px, red.depth(t.segment(&at, BLUE).1).abs());
+        let Some((a, b, true)) = station_span(t, &at, RED, size, &s) else {
+            return None;
+        };
+        let mut p = profile(frame, &red, (a, b), None, &s, red_step);
+        p.corner_in_view = true;
+        Some((at.scale, p))
+    };
+    // Every SCAN_STEP_PX pixels first (the samples lie clear of the blurred step, so
+    // a line a pixel off the edge shows most of its step), then every pixel around
+    // the lines that show part of it.
+    // The largest median step, and the run of distances that show it (a sharp edge
+    // shows its whole step over a few pixels: the middle of the run is taken).
+    let mut best: Option<(f64, i64, i64)> = None;
+    for coarse in (SCAN_STEP_PX..=farthest.floor() as i64).step_by(SCAN_STEP_PX as usize) {
+        if at_depth(coarse).is_none_or(|(_, p)| p.step_ratio() < SCAN_RATIO) {
+            continue;
+        }
+        for d in coarse - SCAN_STEP_PX / 2..=coarse + SCAN_STEP_PX / 2 {
+            let Some((_, p)) = at_depth(d) else {
+                continue;
+            };
+            let ratio = p.step_ratio();
+            if ratio < FOUND_RATIO || p.refusal(Edge::Red).is_some() {
+                continue;
+            }
+            best = match best {
+                Some((r, first, last)) if ratio == r && d == last + 1 => Some((r, first, d)),
+                Some((r, ..)) if ratio <= r => best,
+                _ => Some((ratio, d, d)),
+            };
+        }
+    }
+    best.map(|(_, first, last)| 0.5 * (first + last) as f64 / per_scale)
+}
+
 /// How far either way of the predicted face its step is looked for, pixels.
 const FACE_SEARCH_PX: i64 = 12;
 /// A station locates the face's step where its ratio reaches this, and shows a face
@@ -978,6 +1069,80 @@ fn locate_end(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pyramid under a horizontal beam: red 50 reference pixels above the apex
+    /// (the probe below it), the faces at 30 deg either side of the vertical, the
+    /// beam 10 thick, its free end 40 to the right of the apex's foot.
+    fn pyramid_template() -> Template {
+        use super::super::template::TemplateEdge;
+        let (s, c) = 30f64.to_radians().sin_cos();
+        let edge = |normal, offset, tip_tau, far_tau| TemplateEdge {
+            normal,
+            offset,
+            tip_tau,
+            far_tau,
+            far_open: false,
+            polarity: 1.0,
+        };
+        Template {
+            edges: [
+                edge([0.0, 1.0], -50.0, 40.0, -200.0),
+                edge([c, -s], 0.0, 0.0, 40.0),
+                edge([-c, -s], 0.0, 0.0, -40.0),
+            ],
+            apex: [100.0, 100.0],
+            height: 50.0,
+            bend_tau: 20.0,
+            beam_px: Some(10.0),
+        }
+    }
+
+    /// The probe of `t` at `pose` (200) on 50, its pyramid drawn only below
+    /// `pyramid_from_y` (faces fading into the ground above), its beam only if `beam`.
+    fn probe_frame(t: &Template, pose: &Pose, pyramid_from_y: f64, beam: bool) -> GrayImage {
+        let lines = [RED, BLUE, GREEN].map(|e| t.line(pose, e));
+        let (free, far) = t.segment(pose, RED);
+        let len = norm(sub(far, free));
+        let dir = scale(sub(far, free), 1.0 / len);
+        let thick = t.beam_px.unwrap() * pose.scale;
+        GrayImage::from_fn(400, 300, |x, y| {
+            let p = [f64::from(x), f64::from(y)];
+            let pyramid = lines.iter().all(|l| l.depth(p) >= 0.0) && p[1] >= pyramid_from_y;
+            let along_beam = dot(sub(p, free), dir);
+            let in_beam = beam
+                && (0.0..=thick).contains(&lines[RED].depth(p))
+                && (0.0..=len).contains(&along_beam);
+            image::Luma([if pyramid || in_beam { 200 } else { 50 }])
+        })
+    }
+
+    #[test]
+    fn the_beam_edge_is_found_at_its_own_scale() {
+        let t = pyramid_template();
+        let truth = Pose {
+            psi: 0.02,
+            scale: 2.5,
+            apex: [220.0, 250.0],
+        };
+        // Faces seen only over their last 60 pixels to the apex: the scale the fit
+        // left them at is far off.
+        let frame = probe_frame(&t, &truth, 190.0, true);
+        for guess in [0.8, 1.6, 3.5] {
+            let placed = Pose {
+                scale: guess,
+                ..truth
+            };
+            let found = beam_edge_scale(&frame, &t, &placed, 1.0, 150.0).unwrap();
+            // To the pixel of the beam edge's distance (50 reference pixels per scale).
+            assert!(
+                (found - truth.scale).abs() <= 1.0 / 50.0,
+                "{guess}: {found}"
+            );
+        }
+        // No beam: no line anywhere the beam edge could lie.
+        let bare = probe_frame(&t, &truth, 190.0, false);
+        assert_eq!(beam_edge_scale(&bare, &t, &truth, 1.0, 150.0), None);
+    }
 
     #[test]
     fn the_free_end_is_located_where_the_beam_stops() {

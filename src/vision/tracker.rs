@@ -27,7 +27,7 @@ use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
 use super::rigid::{calibrate as calibrate_rigid, RigidTemplate, RigidTracker};
 use super::stations;
-use super::template::{Pose, Template};
+use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss, VisionError};
 use crate::model::Cantilever;
@@ -402,11 +402,43 @@ impl PyramidTracker {
     }
 
     /// A hypothesis refined and verified.
+    ///
+    /// A tip placed from its two faces alone and refused for its beam edge or its
+    /// scale is fitted and verified once more at the scale where the frame shows the
+    /// beam edge, if it does anywhere ([`stations::beam_edge_scale`]): faces fading
+    /// into a bright background place the scale far off. That second placement is
+    /// taken only with the beam edge in its fit and the beam's thickness calibrated,
+    /// so that the lower face and the free end check the scale found: without them,
+    /// a probe of another geometry finds a scale where its own beam edge passes.
     fn evaluate(&mut self, frame: &GrayImage, t: &Template, hyp: &Hypothesis) -> Estimate {
-        let Some((pose, fit, bands)) = self.refine(frame, t, hyp) else {
+        let Some((pose, fit, bands)) = self.refine(frame, t, hyp, false) else {
             return Estimate::missed(Miss::LowConfidence, 0.0);
         };
-        self.verdict(frame, t, hyp, &pose, &fit, &bands)
+        let first = self.verdict(frame, t, hyp, &pose, &fit, &bands);
+        let fitted = |e: usize| bands[e].is_some() && fit.edges[e].is_some();
+        let refused_scale = first.miss == Some(Miss::EdgeMissing(Edge::Red.into()))
+            || first.miss == Some(Miss::ScaleMismatch);
+        let rescale =
+            refused_scale && t.beam_px.is_some() && !fitted(RED) && fitted(BLUE) && fitted(GREEN);
+        if !rescale {
+            return first;
+        }
+        let red_step = self.calibration.edge(Edge::Red).contrast;
+        let Some(scale) = stations::beam_edge_scale(frame, t, &pose, fit.blur, red_step) else {
+            return first;
+        };
+        let k = self.det.pyr.factor as f64;
+        let moved = super::hypothesis::rescaled(hyp, scale / k);
+        let Some((pose, fit, bands)) = self.refine(frame, t, &moved, true) else {
+            return first;
+        };
+        let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
+        let beam_edge_fitted = bands[RED].is_some() && fit.edges[RED].is_some();
+        if second.detected && beam_edge_fitted {
+            second
+        } else {
+            first
+        }
     }
 
     /// The grey-level fit of a hypothesis: a coarse pass on bands placed from the search,
@@ -418,6 +450,7 @@ impl PyramidTracker {
         frame: &GrayImage,
         t: &Template,
         hyp: &Hypothesis,
+        with_beam_edge: bool,
     ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
         let k = self.det.pyr.factor as f64;
         let pose = Pose {
@@ -429,7 +462,9 @@ impl PyramidTracker {
         // Fit the edges the search found: its lines, and a left-out edge only where the
         // edge map confirms it (a pair leaves the scale, hence that edge, uncertain).
         let mut keep: [bool; 3] = std::array::from_fn(|e| {
-            hyp.members[e].is_some() || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
+            hyp.members[e].is_some()
+                || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
+                || (with_beam_edge && e == RED)
         });
         let only = |b: [Option<Band>; 3], keep: &[bool; 3]| -> [Option<Band>; 3] {
             std::array::from_fn(|e| b[e].filter(|_| keep[e]))
