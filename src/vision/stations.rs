@@ -390,6 +390,7 @@ pub fn check_edges(
     let mut beam_edge = fitted[RED].then_some(red);
     // The faces whose corner is in view, for the turned-face check.
     let mut faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
+    let mut shown_step = [1.0; 3];
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -452,6 +453,7 @@ pub fn check_edges(
         if let Some(miss) = p.refusal(Edge::ALL[e]) {
             return Some(miss);
         }
+        shown_step[e] = p.step_ratio();
         if e != RED && corner {
             faces[e] = Some(((a, b), p, partner));
             let held = p.corner_held();
@@ -472,7 +474,7 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red.into()));
     }
-    if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, fitted) {
+    if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, &shown_step) {
         return Some(miss);
     }
     if let Some(miss) =
@@ -773,9 +775,16 @@ const END_AGAINST: usize = 1;
 /// How far, as a share of its length, a face may end from its predicted base: the
 /// stations over its end are that far apart, and a face's end is blurred.
 const END_SLACK: f64 = 0.1;
+/// A face's end is where its step fades below half the step the face shows along its
+/// length (its median ratio, taken between this and 1): a face drawn fainter than
+/// calibrated, by charging or on another body, ends where it fades to half of its
+/// own step, not of the calibrated one.
+const END_SHOWN_MIN: f64 = 0.3;
 
 /// Where face `e`'s step ends along its predicted line, as a share of its predicted
-/// length (1 at the predicted base); `None` when its stations are not all in view.
+/// length (1 at the predicted base), the face showing `shown` of its calibrated step
+/// `step` along its length ([`END_SHOWN_MIN`]); `None` when its stations are not all
+/// in view.
 fn face_end(
     frame: &GrayImage,
     t: &Template,
@@ -783,6 +792,7 @@ fn face_end(
     e: usize,
     s: &Sampling,
     step: f64,
+    shown: f64,
 ) -> Option<f64> {
     let (tip, base) = t.segment(pose, e);
     let line = t.line(pose, e);
@@ -799,7 +809,8 @@ fn face_end(
     if p.stations < STATIONS {
         return None;
     }
-    let shows = |k: usize| p.ratio[k] >= LOCATED_RATIO;
+    let located = LOCATED_RATIO * shown.clamp(END_SHOWN_MIN, 1.0);
+    let shows = |k: usize| p.ratio[k] >= located;
     // The splits that best explain the stations: showing the face before, not after.
     let score = |j: usize| {
         (0..j).filter(|&k| shows(k)).count() + (j..STATIONS).filter(|&k| !shows(k)).count()
@@ -816,24 +827,23 @@ fn face_end(
     Some(1.0 - END_SPAN + 2.0 * END_SPAN * j / STATIONS as f64)
 }
 
-/// Both faces, where their fits place them and their ends are measured, ending more
-/// than [`END_SLACK`] of their length before or beyond the bases the scale predicts:
-/// the pyramid is not this probe's size at this scale. The scale comes from the beam
-/// edge's distance to the apex, so a beam of another thickness moves it while the
-/// pyramid keeps its size. One face alone can end early or late where a particle or
-/// a bright substrate lies at its base; the scale moves both.
+/// Both faces, where the pose places them and their ends are measured (whether or not
+/// the fit kept them), ending more than [`END_SLACK`] of their length before or
+/// beyond the bases the scale predicts: the pyramid is not this probe's size at this
+/// scale. The scale comes from the beam edge's distance to the apex, so a beam of
+/// another thickness moves it while the pyramid keeps its size. One face alone can
+/// end early or late where a particle or a bright substrate lies at its base; the
+/// scale moves both.
 fn face_ends(
     frame: &GrayImage,
     t: &Template,
     pose: &Pose,
     s: &Sampling,
     calibrated: &[f64; 3],
-    fitted: [bool; 3],
+    shown_step: &[f64; 3],
 ) -> Option<Miss> {
-    if !(fitted[BLUE] && fitted[GREEN]) {
-        return None;
-    }
-    let end = |e: usize| face_end(frame, t, pose, e, s, calibrated[e]).map(|f| f - 1.0);
+    let end =
+        |e: usize| face_end(frame, t, pose, e, s, calibrated[e], shown_step[e]).map(|f| f - 1.0);
     let (b, g) = (end(BLUE)?, end(GREEN)?);
     (b * g > 0.0 && b.abs().min(g.abs()) > END_SLACK).then_some(Miss::ScaleMismatch)
 }
