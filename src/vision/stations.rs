@@ -1080,33 +1080,6 @@ fn locate_end(
 mod tests {
     use super::*;
 
-    /// A pyramid under a horizontal beam: red 50 reference pixels above the apex
-    /// (the probe below it), the faces at 30 deg either side of the vertical, the
-    /// beam 10 thick, its free end 40 to the right of the apex's foot.
-    fn pyramid_template() -> Template {
-        use super::super::template::TemplateEdge;
-        let (s, c) = 30f64.to_radians().sin_cos();
-        let edge = |normal, offset, tip_tau, far_tau| TemplateEdge {
-            normal,
-            offset,
-            tip_tau,
-            far_tau,
-            far_open: false,
-            polarity: 1.0,
-        };
-        Template {
-            edges: [
-                edge([0.0, 1.0], -50.0, 40.0, -200.0),
-                edge([c, -s], 0.0, 0.0, 40.0),
-                edge([-c, -s], 0.0, 0.0, -40.0),
-            ],
-            apex: [100.0, 100.0],
-            height: 50.0,
-            bend_tau: 20.0,
-            beam_px: Some(10.0),
-        }
-    }
-
     /// The probe of `t` at `pose` (200) on 50, its pyramid drawn only below
     /// `pyramid_from_y` (faces fading into the ground above), its beam only if `beam`.
     fn probe_frame(t: &Template, pose: &Pose, pyramid_from_y: f64, beam: bool) -> GrayImage {
@@ -1128,7 +1101,11 @@ mod tests {
 
     #[test]
     fn the_beam_edge_is_found_at_its_own_scale() {
-        let t = pyramid_template();
+        // The toy pyramid under a beam 10 reference pixels thick.
+        let t = Template {
+            beam_px: Some(10.0),
+            ..super::super::template::toy()
+        };
         let truth = Pose {
             psi: 0.02,
             scale: 2.5,

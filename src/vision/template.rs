@@ -137,36 +137,39 @@ impl Template {
     }
 }
 
+/// A toy pyramid for unit tests: red horizontal 50 px above the apex (the probe,
+/// brighter, below it), blue and green at +-30 deg from the vertical, 50 px long, the
+/// beam's free end 40 px to the right of the apex's foot on red.
+#[cfg(test)]
+pub(crate) fn toy() -> Template {
+    let n_red = [0.0, 1.0];
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let n_blue = [c, -s];
+    let n_green = [-c, -s];
+    let edge = |normal, offset, tip_tau, far_tau| TemplateEdge {
+        normal,
+        offset,
+        tip_tau,
+        far_tau,
+        far_open: false,
+        polarity: 1.0,
+    };
+    Template {
+        edges: [
+            edge(n_red, -50.0, 40.0, -200.0),
+            edge(n_blue, 0.0, 0.0, 50.0),
+            edge(n_green, 0.0, 0.0, -50.0),
+        ],
+        apex: [100.0, 100.0],
+        height: 50.0,
+        bend_tau: 20.0,
+        beam_px: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn toy() -> Template {
-        // Red horizontal 50 px above the apex (bright below), blue and green at +-30 deg.
-        let n_red = [0.0, 1.0];
-        let (s, c) = 30f64.to_radians().sin_cos();
-        let n_blue = [c, -s];
-        let n_green = [-c, -s];
-        let edge = |normal, offset, tip_tau, far_tau| TemplateEdge {
-            normal,
-            offset,
-            tip_tau,
-            far_tau,
-            far_open: false,
-            polarity: 1.0,
-        };
-        Template {
-            edges: [
-                edge(n_red, -50.0, 40.0, -200.0),
-                edge(n_blue, 0.0, 0.0, 50.0),
-                edge(n_green, 0.0, 0.0, -50.0),
-            ],
-            apex: [100.0, 100.0],
-            height: 50.0,
-            bend_tau: 20.0,
-            beam_px: None,
-        }
-    }
 
     #[test]
     fn identity_pose_reproduces_the_reference() {
