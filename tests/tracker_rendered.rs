@@ -430,19 +430,20 @@ fn calibration_finds_the_true_edges_and_the_reference_reads_zero() {
 
 #[test]
 fn calibration_measures_the_beam_thickness() {
-    // The beam's thickness behind the pyramid, measured on each reference where enough
-    // of that stretch is in view, against the rendered thickness: over the four
-    // rendered suites of the confidence table (24 references) and the real-background
-    // suite (12), 19 and 9 measured, each within 0.61 and 0.66 px. A reference whose
-    // beam leaves the frame close behind the pyramid has too little of it to measure.
+    // The beam's thickness, measured behind the pyramid or, where the beam leaves the
+    // reference there, on the overhang in front of it, against the rendered
+    // thickness: over the four rendered suites of the confidence table (24
+    // references) and the real-background suite (12), 23 and 12 measured, all within
+    // 0.70 px (on half-pixel steps). The bound is what the checks reading it tolerate:
+    // their samples stand 1.5 blurs and a pixel clear of the lower face.
     let crops = rendered::real_crops();
     let mut sets: Vec<(Vec<Session>, &[image::GrayImage], usize)> = vec![];
     let rendered_suites = [31, 1, 2, 3]
         .iter()
         .flat_map(|&seed| scene::suite(seed, 6, 1))
         .collect();
-    sets.push((rendered_suites, &[], 19));
-    sets.push((scene::real_suite(71, 12, 50, crops.len()), &crops, 9));
+    sets.push((rendered_suites, &[], 23));
+    sets.push((scene::real_suite(71, 12, 50, crops.len()), &crops, 12));
     for (sessions, over, at_least) in sets {
         let mut measured = 0;
         for (i, s) in sessions.iter().enumerate() {
@@ -451,7 +452,7 @@ fn calibration_measures_the_beam_thickness() {
             if let Some(px) = cal.beam_px() {
                 measured += 1;
                 assert!(
-                    (px - truth).abs() <= 0.7,
+                    (px - truth).abs() <= 1.0,
                     "reference {i}: {px} px, truth {truth:.2} px"
                 );
             }

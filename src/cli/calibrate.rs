@@ -207,11 +207,11 @@ pub fn calibration_block(
     ));
     out.push_str(&match calibration.beam_px() {
         Some(px) => {
-            format!("# Beam thickness behind the pyramid: {px:.1} px (checked on every frame)\n")
+            format!("# Beam thickness: {px:.1} px (checked on every frame)\n")
         }
-        None => "# Beam thickness: not measured, the reference does not show the beam behind\n\
-                 # the pyramid; a probe of another beam thickness is not told apart. Take a\n\
-                 # reference that shows it for that check.\n"
+        None => "# Beam thickness: not measured, the reference shows the beam's lower face\n\
+                 # neither behind the pyramid nor at the free end; a probe of another beam\n\
+                 # thickness is not told apart. Take a reference that shows it for that check.\n"
             .to_string(),
     });
     if origin != PixelOrigin::Centre {

@@ -236,9 +236,9 @@ impl Calibration {
         (self.edges[BLUE].contrast + self.edges[GREEN].contrast).signum()
     }
 
-    /// The beam's thickness behind the pyramid measured on the reference (the depth
-    /// of its lower face below the red line), pixels; `None` where it was not
-    /// measured.
+    /// The beam's thickness measured on the reference (the depth of its lower face
+    /// below the red line, behind the pyramid or at the free end), pixels; `None`
+    /// where it was not measured.
     pub fn beam_px(&self) -> Option<f64> {
         self.template.beam_px
     }
@@ -279,13 +279,16 @@ const BEAM_AGREE_SHARE: f64 = 0.6;
 const BEAM_MIN_PROFILES: usize = BEAM_PROFILES / 4;
 const BEAM_AGREE_PX: f64 = 1.5;
 
-/// The depth of the beam's lower face below the red line behind the pyramid, reference
-/// pixels: on profiles across the beam from the back face's base towards the clamp
-/// (one tip height of it), the first depth where the grey level steps from the
-/// probe's to the surroundings' by a good share of red's contrast. A profile that
-/// leaves the reference before finding that step is out of view and not counted (a
-/// beam running out of a frame's side). `None` when fewer than a quarter of them are
-/// in view or those in view do not agree.
+/// The depth of the beam's lower face below the red line, reference pixels: behind
+/// the pyramid, on profiles across the beam from the back face's base towards the
+/// clamp (one tip height of it); where the beam leaves the reference there, on the
+/// overhang in front of the pyramid, between the front face's base and the free end
+/// (the rigid block's lower face, where the tracker's free-end check reads it). On
+/// each profile it is the first depth where the grey level steps from the probe's to
+/// the surroundings' by a good share of red's contrast. A profile that leaves the
+/// reference before finding that step is out of view and not counted (a beam running
+/// out of a frame's side). `None` when on both stretches fewer than a quarter of the
+/// profiles are in view or those in view do not agree.
 fn beam_thickness(
     reference: &GrayImage,
     t: &Template,
@@ -293,26 +296,74 @@ fn beam_thickness(
     blur: f64,
 ) -> Option<f64> {
     let red = &t.edges[RED];
+    let toward_clamp = (red.far_tau - red.tip_tau).signum();
+    let k = (1.5 * blur).ceil().max(1.0);
+    // Where a point's foot on the red line lies, as `tau`.
+    let tau_of = |p: [f64; 2]| dot(along(red.normal), sub(p, t.apex));
+    let back_base = add(t.apex, t.edges[BLUE].point(t.edges[BLUE].far_tau));
+    let behind = tau_of(back_base) + toward_clamp * (2.0 * k + 2.0);
+    let measured = lower_face_depth(
+        reference,
+        t,
+        red_contrast,
+        k,
+        (behind, behind + toward_clamp * t.height),
+    );
+    if measured.is_some() {
+        return measured;
+    }
+    // The overhang, clear of the free end and of the front face's base by the
+    // blurred step's half width and a pixel.
+    let front_base = add(t.apex, t.edges[GREEN].point(t.edges[GREEN].far_tau));
+    let (from, to) = (
+        red.tip_tau + toward_clamp * (k + 1.0),
+        tau_of(front_base) - toward_clamp * (k + 1.0),
+    );
+    if (to - from) * toward_clamp < MIN_OVERHANG_PX {
+        return None;
+    }
+    lower_face_depth(reference, t, red_contrast, k, (from, to))
+}
+
+/// Shortest overhang, reference pixels, on which [`beam_thickness`] measures.
+const MIN_OVERHANG_PX: f64 = 4.0;
+
+/// [`beam_thickness`] on [`BEAM_PROFILES`] profiles down from the red line at `tau`
+/// from `span.0` to `span.1`, the step read between samples `k` either side (each the
+/// mean over `k` pixels either side along the beam).
+fn lower_face_depth(
+    reference: &GrayImage,
+    t: &Template,
+    red_contrast: f64,
+    k: f64,
+    span: (f64, f64),
+) -> Option<f64> {
+    let red = &t.edges[RED];
     let n = red.normal;
-    let toward_clamp = scale(along(n), (red.far_tau - red.tip_tau).signum());
-    let base = add(t.apex, t.edges[BLUE].point(t.edges[BLUE].far_tau));
-    let red_line_point = add(t.apex, red.point(red.tip_tau));
-    let depth_of = |p: [f64; 2]| dot(n, sub(p, red_line_point));
-    let start_depth = depth_of(base);
     let (w, h) = (reference.width() as f64, reference.height() as f64);
-    let value = |p: [f64; 2]| -> Option<f64> {
+    let pixel = |p: [f64; 2]| -> Option<f64> {
         let (x, y) = (p[0].round(), p[1].round());
         (x >= 0.0 && y >= 0.0 && x <= w - 1.0 && y <= h - 1.0)
             .then(|| f64::from(reference.get_pixel(x as u32, y as u32)[0]))
     };
-    let k = (1.5 * blur).ceil().max(1.0);
+    // The mean over `k` pixels either side along the beam: a low-contrast beam's
+    // lower face is not lost in single pixels' noise.
+    let dir = along(n);
+    let value = |p: [f64; 2]| -> Option<f64> {
+        let mut sum = 0.0;
+        let steps = k as i64;
+        for j in -steps..=steps {
+            sum += pixel(add(p, scale(dir, j as f64)))?;
+        }
+        Some(sum / (2 * steps + 1) as f64)
+    };
     let max_depth = 0.9 * t.height;
     let mut found = [0.0; BEAM_PROFILES];
     let (mut m, mut in_view) = (0, 0);
     for j in 0..BEAM_PROFILES {
-        let s = 2.0 * k + 2.0 + t.height * j as f64 / BEAM_PROFILES as f64;
+        let tau = span.0 + (span.1 - span.0) * j as f64 / BEAM_PROFILES as f64;
         // A point on the red line level with this stretch of beam.
-        let top = add(sub(base, scale(n, start_depth)), scale(toward_clamp, s));
+        let top = add(t.apex, red.point(tau));
         let at = |d: f64| add(top, scale(n, d));
         let mut d = k + 1.0;
         // Whether the whole search stays in the reference.

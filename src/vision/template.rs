@@ -63,7 +63,7 @@ pub struct Template {
     /// Position along red (as `tau`) of the back of the pyramid's base: the beam is
     /// rigid (straight) from there to the free end, and bends beyond.
     pub bend_tau: f64,
-    /// The beam's thickness behind the pyramid: the depth of its lower face below the
+    /// The beam's thickness: the depth of its lower face below the
     /// red line, reference pixels, where calibration measured it.
     pub beam_px: Option<f64>,
 }
