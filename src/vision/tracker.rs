@@ -56,6 +56,11 @@ const RETRY_CONTRAST_NOISES: f64 = 16.0;
 /// Per-edge flags.
 type Vec3Mask = [bool; 3];
 
+/// The edges a grey-level fit placed: given a band and found by the fit.
+fn fitted_edges(bands: &[Option<Band>; 3], fit: &FitResult) -> Vec3Mask {
+    std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some())
+}
+
 /// Blur (pixels) the coarse fit's bands are sized for, at least: SEM frames range from
 /// 0.8 to 1.6 (docs/renderer.md).
 const START_BLUR_PX: f64 = 1.4;
@@ -415,11 +420,11 @@ impl PyramidTracker {
             return Estimate::missed(Miss::LowConfidence, 0.0);
         };
         let first = self.verdict(frame, t, hyp, &pose, &fit, &bands);
-        let fitted = |e: usize| bands[e].is_some() && fit.edges[e].is_some();
+        let fitted = fitted_edges(&bands, &fit);
         let refused_scale = first.miss == Some(Miss::EdgeMissing(Edge::Red.into()))
             || first.miss == Some(Miss::ScaleMismatch);
         let rescale =
-            refused_scale && t.beam_px.is_some() && !fitted(RED) && fitted(BLUE) && fitted(GREEN);
+            refused_scale && t.beam_px.is_some() && !fitted[RED] && fitted[BLUE] && fitted[GREEN];
         if !rescale {
             return first;
         }
@@ -433,8 +438,7 @@ impl PyramidTracker {
             return first;
         };
         let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
-        let beam_edge_fitted = bands[RED].is_some() && fit.edges[RED].is_some();
-        if second.detected && beam_edge_fitted {
+        if second.detected && fitted_edges(&bands, &fit)[RED] {
             second
         } else {
             first
@@ -493,8 +497,7 @@ impl PyramidTracker {
                 r.contrast / self.calibration.edge(Edge::ALL[e]).contrast
             })
         };
-        let fitted: Vec3Mask =
-            std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some());
+        let fitted = fitted_edges(&bands, &fit);
         let weak: Vec3Mask =
             std::array::from_fn(|e| fitted[e] && ratio(&fit, e) < DROP_CONTRAST_RATIO);
         let strong = (0..3).filter(|&e| fitted[e] && !weak[e]).count();
@@ -532,8 +535,14 @@ impl PyramidTracker {
             return Some(Miss::RotationOutside);
         }
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
-        let fitted = std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some());
-        stations::check_edges(frame, t, pose, fit.blur, &calibrated, fitted)
+        stations::check_edges(
+            frame,
+            t,
+            pose,
+            fit.blur,
+            &calibrated,
+            fitted_edges(bands, fit),
+        )
     }
 
     #[allow(clippy::too_many_arguments)]
