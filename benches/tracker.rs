@@ -132,9 +132,9 @@ fn bench_clutter(c: &mut Criterion) {
     group.finish();
 }
 
-/// `probes/<size>/<n>-of-<count>`: several probes in one view (`ProbeSet`): the first
-/// probe alone and all `count`, per frame over eight frames of mixed looks with every
-/// probe in view.
+/// `probes/<size>/<n>-of-<count>[-two-threads]`: several probes in one view
+/// (`ProbeSet`): the first probe alone and all `count` (on one thread, and on two),
+/// per frame over eight frames of mixed looks with every probe in view.
 fn bench_probes(c: &mut Criterion) {
     let mut group = c.benchmark_group("probes");
     for (count, width, height) in [(2usize, 640u32, 480u32), (4, 1024, 768)] {
@@ -147,16 +147,24 @@ fn bench_probes(c: &mut Criterion) {
             .map(|f| scene::render(f).0)
             .collect();
         group.throughput(Throughput::Elements(frames.len() as u64));
-        // The first probe alone on the same frames, then all of them.
-        for n in [1, count] {
+        // The first probe alone on the same frames, then all of them on one thread,
+        // then on two (as the daemon tracks them).
+        for (n, threads) in [(1, 1), (count, 1), (count, 2)] {
             let mut trackers = session
                 .trackers()
                 .expect("the rendered reference calibrates");
             trackers.truncate(n);
             trackers.iter_mut().for_each(|t| t.set_coherence(false));
             let mut set = ProbeSet::new(trackers, &vec![0; n]);
+            if threads == 2 {
+                set = set.on_two_threads().expect("a second thread starts");
+            }
             let mut out = vec![Estimate::default(); n];
-            let name = BenchmarkId::new(format!("{width}x{height}"), format!("{n}-of-{count}"));
+            let name = match threads {
+                1 => format!("{n}-of-{count}"),
+                _ => format!("{n}-of-{count}-two-threads"),
+            };
+            let name = BenchmarkId::new(format!("{width}x{height}"), name);
             group.bench_function(name, |b| {
                 b.iter(|| {
                     for f in &frames {

@@ -3,7 +3,7 @@
 //! without coherence.
 use image::GrayImage;
 use nanoforce::scene::{self, render_into};
-use nanoforce::vision::{Estimate, ProbeSet, Tracker};
+use nanoforce::vision::{Estimate, ProbeSet, Tracker, SECOND_TRACKING_THREAD};
 
 mod tracker_support;
 
@@ -67,24 +67,35 @@ fn tracking_allocates_nothing_after_warm_up() {
 fn tracking_several_probes_allocates_nothing_after_warm_up() {
     let _turn = turn();
     alloc_counter::watch_this_thread();
+    alloc_counter::watch_threads_named(SECOND_TRACKING_THREAD);
     let session = scene::Session::several(41, 2, 24, 640, 480);
-    let trackers = session
-        .trackers()
-        .expect("the rendered reference calibrates");
-    let mut set = ProbeSet::new(trackers, &[0, 0]);
     let frames: Vec<GrayImage> = session.frames.iter().map(|f| scene::render(f).0).collect();
-    let mut out = vec![Estimate::default(); 2];
-    set.track(&frames[0], &mut out);
-    alloc_counter::start();
-    let mut detected = 0;
-    for frame in &frames {
-        set.track(frame, &mut out);
-        detected += out.iter().filter(|e| e.detected).count();
+    for threads in [1, 2] {
+        let trackers = session
+            .trackers()
+            .expect("the rendered reference calibrates");
+        let mut set = ProbeSet::new(trackers, &[0, 0]);
+        if threads == 2 {
+            set = set.on_two_threads().expect("a second thread starts");
+        }
+        let mut out = vec![Estimate::default(); 2];
+        set.track(&frames[0], &mut out);
+        alloc_counter::start();
+        let mut detected = 0;
+        for frame in &frames {
+            set.track(frame, &mut out);
+            detected += out.iter().filter(|e| e.detected).count();
+        }
+        let n = alloc_counter::stop();
+        assert_eq!(
+            n,
+            0,
+            "{n} allocations over {} frames on {threads} threads",
+            frames.len()
+        );
+        assert!(
+            detected > frames.len(),
+            "frames were really tracked: {detected}"
+        );
     }
-    let n = alloc_counter::stop();
-    assert_eq!(n, 0, "{n} allocations over {} frames", frames.len());
-    assert!(
-        detected > frames.len(),
-        "frames were really tracked: {detected}"
-    );
 }

@@ -160,3 +160,27 @@ fn a_probe_set_tracks_each_probe_as_its_tracker_does() {
         }
     }
 }
+
+#[test]
+fn a_probe_set_on_two_threads_gives_what_it_gives_on_one() {
+    // Four probes (two per thread) and two (one each), conflicts between them included.
+    for (count, width, height) in [(4, 1024, 768), (2, 640, 480)] {
+        let session = Session::several(seed(3), count, 40, width, height);
+        let groups = vec![0; count];
+        let mut one = ProbeSet::new(trackers(&session), &groups);
+        let mut two = ProbeSet::new(trackers(&session), &groups)
+            .on_two_threads()
+            .expect("a second thread starts");
+        let mut frame = GrayImage::new(1, 1);
+        let (mut a, mut b) = (
+            vec![Estimate::default(); count],
+            vec![Estimate::default(); count],
+        );
+        for (i, spec) in session.frames.iter().enumerate() {
+            render_into(spec, &mut frame);
+            one.track(&frame, &mut a);
+            two.track(&frame, &mut b);
+            assert_eq!(a, b, "{count} probes, frame {i}");
+        }
+    }
+}

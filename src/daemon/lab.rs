@@ -33,6 +33,20 @@ impl VisionEstimator {
     pub fn single(tracker: Tracker) -> Self {
         VisionEstimator(ProbeSet::new(vec![tracker], &[()]))
     }
+
+    /// The live run's estimator: several probes are tracked on two threads when the
+    /// host has two cores or more (a frame's latency is then the shared detection
+    /// stages and the slower half of the probes), on one thread otherwise.
+    pub fn live(trackers: ProbeSet) -> anyhow::Result<Self> {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if cores < 2 {
+            return Ok(VisionEstimator(trackers));
+        }
+        let trackers = trackers
+            .on_two_threads()
+            .context("starting the probes' second tracking thread")?;
+        Ok(VisionEstimator(trackers))
+    }
 }
 
 impl Estimator for VisionEstimator {
@@ -122,7 +136,7 @@ pub fn open(config: &Config, clock: Clock) -> anyhow::Result<Devices> {
     }
     Ok(Devices {
         frames,
-        estimator: Box::new(VisionEstimator(trackers)),
+        estimator: Box::new(VisionEstimator::live(trackers)?),
         stages,
         haptic,
         names,

@@ -49,6 +49,7 @@ mod probes;
 mod pyramid;
 mod refine;
 mod rigid;
+mod second_thread;
 mod sigma;
 mod simd;
 mod stations;
@@ -69,7 +70,8 @@ pub use options::{
 };
 pub use overlay::{draw_calibration, draw_overlay, draw_overlays};
 pub use probes::{
-    refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES, SINGLE_NAME,
+    refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES, SECOND_TRACKING_THREAD,
+    SINGLE_NAME,
 };
 pub use rigid::{
     calibrate as calibrate_rigid, Pose as RigidPose, RigidEdge, RigidError, RigidTemplate,

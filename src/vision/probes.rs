@@ -13,12 +13,16 @@
 use image::GrayImage;
 
 pub use super::claim::{Claim, MAX_PROBES};
+use super::second_thread::SecondThread;
 use super::tracker::Detection;
 use super::{Estimate, Miss, Tracker};
 
 /// The name a probe goes by when it is the only one (a lab file's top-level
 /// `[cantilever]` and `[tracker]`, a rendered session of one probe).
 pub const SINGLE_NAME: &str = "probe";
+
+/// The name of the thread a [`ProbeSet`] on two threads tracks half its probes on.
+pub const SECOND_TRACKING_THREAD: &str = "tracker-2";
 
 /// How far one probe's scale may stray from the others' (calibrated on the same
 /// reference) as a ratio: one frame has one magnification, so every probe calibrated
@@ -36,9 +40,11 @@ pub struct ProbeSet {
     /// Per probe, the first probe calibrated on the same reference image: probes of
     /// one group are seen at one scale.
     groups: Vec<usize>,
-    /// The frame's detection image and edges, built by the first tracker and reused by
-    /// the others with the same binning and threshold.
+    /// The frame's detection image and edges, built for the first probe's tracker and
+    /// reused by the others with the same binning and threshold.
     shared: Detection,
+    /// Where half the probes are tracked, if the set runs on two threads.
+    second: Option<SecondThread>,
 }
 
 impl ProbeSet {
@@ -58,7 +64,18 @@ impl ProbeSet {
             trackers,
             groups,
             shared: Detection::default(),
+            second: None,
         }
+    }
+
+    /// The set tracking half its probes on a second thread (with two or more probes):
+    /// a frame then takes its shared stages and the slower half's tracking, with the
+    /// same estimates as on one thread.
+    pub fn on_two_threads(mut self) -> std::io::Result<ProbeSet> {
+        if self.trackers.len() > 1 && self.second.is_none() {
+            self.second = Some(SecondThread::spawn(SECOND_TRACKING_THREAD)?);
+        }
+        Ok(self)
     }
 
     pub fn len(&self) -> usize {
@@ -94,8 +111,25 @@ impl ProbeSet {
     pub fn track(&mut self, frame: &GrayImage, out: &mut [Estimate]) {
         assert_eq!(out.len(), self.trackers.len(), "one estimate per probe");
         self.shared.clear();
-        for (tracker, estimate) in self.trackers.iter_mut().zip(out.iter_mut()) {
-            *estimate = tracker.track_sharing(frame, &mut self.shared);
+        if let Some(first) = self.trackers.iter().find(|t| t.calibration().is_some()) {
+            first.build_shared(frame, &mut self.shared);
+        }
+        let shared = &self.shared;
+        let track = |trackers: &mut [Tracker], out: &mut [Estimate]| {
+            for (tracker, estimate) in trackers.iter_mut().zip(out.iter_mut()) {
+                *estimate = tracker.track_sharing(frame, shared);
+            }
+        };
+        match &self.second {
+            Some(second) => {
+                // The first half here, with the first probe (the one in front); the
+                // rest on the second thread.
+                let half = self.trackers.len().div_ceil(2);
+                let (mine, theirs) = self.trackers.split_at_mut(half);
+                let (my_out, their_out) = out.split_at_mut(half);
+                second.join(|| track(theirs, their_out), || track(mine, my_out));
+            }
+            None => track(&mut self.trackers, out),
         }
         // Each round settles one conflict; a probe searched again is searched with
         // every claim against it so far ruled out.
@@ -110,7 +144,7 @@ impl ProbeSet {
             if !tracker.exclude_more(claim) {
                 break;
             }
-            out[loser] = tracker.retrack_sharing(frame, &mut self.shared);
+            out[loser] = tracker.retrack_sharing(frame, &self.shared);
         }
         refuse_shared_tips(out);
         refuse_scale_outliers(out, &self.groups);

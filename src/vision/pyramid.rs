@@ -63,6 +63,13 @@ pub fn binning_factor(width: u32) -> u32 {
     (width / DETECTION_WIDTH).max(1)
 }
 
+/// Frame coordinates of the centre of pixel (x, y) of a detection image binned
+/// `factor x factor`.
+pub fn to_frame(factor: u32, p: [f64; 2]) -> [f64; 2] {
+    let k = factor as f64;
+    [k * p[0] + 0.5 * (k - 1.0), k * p[1] + 0.5 * (k - 1.0)]
+}
+
 impl Pyramid {
     /// Bins `frame` and computes its gradient. Allocates only when the size changes.
     pub fn build(&mut self, frame: &GrayImage) {
@@ -100,8 +107,7 @@ impl Pyramid {
 
     /// Frame coordinates of the centre of detection pixel (x, y).
     pub fn to_frame(&self, p: [f64; 2]) -> [f64; 2] {
-        let k = self.factor as f64;
-        [k * p[0] + 0.5 * (k - 1.0), k * p[1] + 0.5 * (k - 1.0)]
+        to_frame(self.factor, p)
     }
 
     /// Detection-image coordinates of frame point `p`.

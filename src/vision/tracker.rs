@@ -166,7 +166,10 @@ pub struct PyramidTracker {
     /// Pyramids other probes' trackers claimed in the frame being tracked: a
     /// hypothesis with its apex on one is not this probe (several probes in one view).
     excluded: [Option<Claim>; MAX_PROBES - 1],
+    /// This tracker's own detection stages, where it cannot share another's.
     det: Detection,
+    /// The binning factor of the stages searched last.
+    factor: u32,
     hough: Hough,
     cands: Candidates,
     search: Search,
@@ -195,6 +198,7 @@ impl PyramidTracker {
             last_before: None,
             excluded: NO_CLAIMS,
             det: Detection::default(),
+            factor: 1,
             hough: Hough::default(),
             cands: Candidates::default(),
             search: Search::default(),
@@ -227,23 +231,22 @@ impl PyramidTracker {
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
         self.det.built = None;
         self.excluded = NO_CLAIMS;
-        self.track_frame(frame)
+        self.track_frame(frame, None)
     }
 
-    /// As [`PyramidTracker::track`], with the detection stages `shared` holds for this frame
-    /// (from another probe's tracker) reused where they match this tracker's (the same
-    /// binning, the same edge threshold); `shared` then holds this tracker's.
-    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
+    /// Builds into `shared` the detection stages this tracker first searches `frame`
+    /// on, for the other probes' trackers to share ([`PyramidTracker::track_sharing`]).
+    pub(super) fn build_shared(&self, frame: &GrayImage, shared: &mut Detection) {
+        self.build(frame, shared, super::pyramid::binning_factor(frame.width()));
+    }
+
+    /// As [`PyramidTracker::track`], searching on the stages `shared` holds for this
+    /// frame (from another probe's tracker) where they are this tracker's (the same
+    /// binning, the same edge threshold), and on its own otherwise.
+    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
+        self.det.built = None;
         self.excluded = NO_CLAIMS;
-        self.track_in(frame, shared)
-    }
-
-    /// Tracks `frame` on the detection stages of `shared`, leaving this tracker's there.
-    fn track_in(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
-        std::mem::swap(&mut self.det, shared);
-        let estimate = self.track_frame(frame);
-        std::mem::swap(&mut self.det, shared);
-        estimate
+        self.track_frame(frame, Some(shared))
     }
 
     /// Rules out one more pyramid; false when it already was, or no room is left.
@@ -262,20 +265,31 @@ impl PyramidTracker {
 
     /// Tracks the frame just tracked again, from the state before it (with what is
     /// now ruled out), sharing detection stages as [`PyramidTracker::track_sharing`].
-    pub(super) fn retrack_sharing(
-        &mut self,
-        frame: &GrayImage,
-        shared: &mut Detection,
-    ) -> Estimate {
+    pub(super) fn retrack_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
         self.last = self.last_before;
-        self.track_in(frame, shared)
+        self.track_frame(frame, Some(shared))
     }
 
-    fn track_frame(&mut self, frame: &GrayImage) -> Estimate {
+    /// Tracks `frame` on the stages of `shared` where they are this tracker's, on its
+    /// own stages otherwise.
+    fn track_frame(&mut self, frame: &GrayImage, shared: Option<&Detection>) -> Estimate {
+        let mut own = std::mem::take(&mut self.det);
+        let estimate = self.track_on(frame, shared, &mut own);
+        self.det = own;
+        estimate
+    }
+
+    fn track_on(
+        &mut self,
+        frame: &GrayImage,
+        shared: Option<&Detection>,
+        own: &mut Detection,
+    ) -> Estimate {
         self.last_before = self.last;
         let template = *self.calibration.template();
         let base = super::pyramid::binning_factor(frame.width());
-        self.detect(frame, &template, base);
+        let det = self.stages(frame, shared, own, base);
+        self.search_stages(det, &template);
         let prior = match (self.coherence, self.last) {
             (true, Some(last)) => Some(Prior {
                 psi: last.psi,
@@ -285,10 +299,12 @@ impl PyramidTracker {
         };
         let mut estimate = None;
         if prior.is_some() {
-            estimate = self.attempt(frame, &template, prior).filter(|e| e.detected);
+            estimate = self
+                .attempt(frame, det, &template, prior)
+                .filter(|e| e.detected);
         }
         let mut estimate = estimate.unwrap_or_else(|| {
-            self.attempt(frame, &template, None)
+            self.attempt(frame, det, &template, None)
                 .unwrap_or_else(|| Estimate::missed(Miss::NoCandidates, 0.0))
         });
         // Faces that the detection image breaks up under strong noise: when the
@@ -304,9 +320,13 @@ impl PyramidTracker {
             .map(|e| self.calibration.edge(e).contrast.abs())
             .into_iter()
             .fold(f64::INFINITY, f64::min);
-        if broken && faintest < RETRY_CONTRAST_NOISES * f64::from(self.det.edges.noise) {
-            self.detect(frame, &template, COARSE_RETRY * base);
-            if let Some(e) = self.attempt(frame, &template, None).filter(|e| e.detected) {
+        if broken && faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise) {
+            let det = self.stages(frame, None, own, COARSE_RETRY * base);
+            self.search_stages(det, &template);
+            if let Some(e) = self
+                .attempt(frame, det, &template, None)
+                .filter(|e| e.detected)
+            {
                 estimate = e;
             }
         }
@@ -319,33 +339,64 @@ impl PyramidTracker {
         estimate
     }
 
-    /// The detection stages (binning, edges, Hough, line candidates) on the frame binned
-    /// `factor x factor`.
-    fn detect(&mut self, frame: &GrayImage, template: &Template, factor: u32) {
-        let det = &mut self.det;
+    /// The edge threshold of this tracker on detection image `pyr` (none without the
+    /// grey mask).
+    fn edge_threshold(&self, pyr: &Pyramid) -> f32 {
+        if self.calibration.grey_mask() {
+            pyr.threshold(self.threshold)
+        } else {
+            f32::NEG_INFINITY
+        }
+    }
+
+    /// Whether `det` holds this tracker's stages of the frame binned `factor x factor`.
+    fn holds(&self, det: &Detection, factor: u32) -> bool {
+        matches!(det.built, Some((f, Some(bits)))
+            if f == factor && bits == self.edge_threshold(&det.pyr).to_bits())
+    }
+
+    /// Builds this tracker's binning and edges of `frame` binned `factor x factor` into
+    /// `det`, keeping what it holds of them already.
+    fn build(&self, frame: &GrayImage, det: &mut Detection, factor: u32) {
         if det.built.is_none_or(|(f, _)| f != factor) {
             det.pyr.build_binned(frame, factor);
             det.built = Some((factor, None));
         }
-        let threshold = if self.calibration.grey_mask() {
-            det.pyr.threshold(self.threshold)
-        } else {
-            f32::NEG_INFINITY
-        };
+        let threshold = self.edge_threshold(&det.pyr);
         let built = Some((factor, Some(threshold.to_bits())));
         if det.built != built {
             det.edges.detect(&det.pyr, threshold);
             det.built = built;
         }
+    }
+
+    /// The stages to search `frame` binned `factor x factor` on: `shared`'s where they
+    /// are this tracker's, else `own`, built.
+    fn stages<'a>(
+        &self,
+        frame: &GrayImage,
+        shared: Option<&'a Detection>,
+        own: &'a mut Detection,
+        factor: u32,
+    ) -> &'a Detection {
+        if let Some(shared) = shared.filter(|s| self.holds(s, factor)) {
+            return shared;
+        }
+        self.build(frame, own, factor);
+        own
+    }
+
+    /// The search's stages on `det`: Hough votes, peaks and line candidates.
+    fn search_stages(&mut self, det: &Detection, template: &Template) {
         let (w, h) = (det.pyr.width, det.pyr.height);
+        self.factor = det.pyr.factor;
         self.hough
             .configure(w, h, self.window_rad, template.gradient_angles());
-        self.hough
-            .vote(&self.det.edges.points, self.det.edges.noise);
+        self.hough.vote(&det.edges.points, det.edges.noise);
         self.hough.find_peaks();
         self.cands.build(
             &self.hough.peaks,
-            &self.det.edges.points,
+            &det.edges.points,
             &self.hough.voters,
             template.gradient_angles(),
             [w, h],
@@ -356,6 +407,7 @@ impl PyramidTracker {
     fn attempt(
         &mut self,
         frame: &GrayImage,
+        det: &Detection,
         t: &Template,
         prior: Option<Prior>,
     ) -> Option<Estimate> {
@@ -363,11 +415,11 @@ impl PyramidTracker {
             return Some(Estimate::missed(Miss::NoCandidates, 0.0));
         }
         // Placements on another probe's claimed pyramid are not this probe's.
-        let (excluded, pyr) = (&self.excluded, &self.det.pyr);
+        let (excluded, pyr) = (&self.excluded, &det.pyr);
         let ruled_out = |apex: [f64; 2]| claimed(excluded, pyr.to_frame(apex));
         let Some(hyp) = self
             .search
-            .run(t, &self.cands, &self.det.edges, prior, &ruled_out)
+            .run(t, &self.cands, &det.edges, prior, &ruled_out)
         else {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
         };
@@ -432,7 +484,7 @@ impl PyramidTracker {
         let Some(scale) = stations::beam_edge_scale(frame, t, &pose, fit.blur, red_step) else {
             return first;
         };
-        let k = self.det.pyr.factor as f64;
+        let k = self.factor as f64;
         let moved = super::hypothesis::rescaled(hyp, scale / k);
         let Some((pose, fit, bands)) = self.refine(frame, t, &moved, true) else {
             return first;
@@ -456,11 +508,11 @@ impl PyramidTracker {
         hyp: &Hypothesis,
         with_beam_edge: bool,
     ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
-        let k = self.det.pyr.factor as f64;
+        let k = self.factor as f64;
         let pose = Pose {
             psi: hyp.pose.psi,
             scale: hyp.pose.scale * k,
-            apex: self.det.pyr.to_frame(hyp.pose.apex),
+            apex: super::pyramid::to_frame(self.factor, hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
         // Fit the edges the search found: its lines, and a left-out edge only where the
@@ -730,9 +782,18 @@ impl Tracker {
         }
     }
 
-    /// As [`Tracker::track`], sharing the pyramid's detection stages with the other
-    /// probes' trackers ([`PyramidTracker::track_sharing`]).
-    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &mut Detection) -> Estimate {
+    /// Builds into `shared` the detection stages this probe's tracker first searches
+    /// `frame` on, for the other probes' trackers ([`PyramidTracker::build_shared`]);
+    /// a rigid probe's tracker shares none.
+    pub(super) fn build_shared(&self, frame: &GrayImage, shared: &mut Detection) {
+        if let Engine::Pyramid(t) = &self.engine {
+            t.build_shared(frame, shared);
+        }
+    }
+
+    /// As [`Tracker::track`], on the pyramid's detection stages `shared` holds where
+    /// they are this tracker's ([`PyramidTracker::track_sharing`]).
+    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
         match &mut self.engine {
             Engine::Pyramid(t) => t.track_sharing(frame, shared),
             Engine::Rigid { .. } => self.track(frame),
@@ -750,11 +811,7 @@ impl Tracker {
 
     /// Tracks the frame just tracked again with what is now ruled out
     /// ([`PyramidTracker::retrack_sharing`]).
-    pub(super) fn retrack_sharing(
-        &mut self,
-        frame: &GrayImage,
-        shared: &mut Detection,
-    ) -> Estimate {
+    pub(super) fn retrack_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
         match &mut self.engine {
             Engine::Pyramid(t) => t.retrack_sharing(frame, shared),
             Engine::Rigid { .. } => self.track(frame),
