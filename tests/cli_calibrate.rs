@@ -249,3 +249,100 @@ fn auto_calibration_prints_the_block_the_clicks_give() {
     let out = run(&["--auto", "--red", "1,2", "3,4"]);
     assert!(!out.status.success(), "--auto with clicks is refused");
 }
+
+#[test]
+fn a_rigid_probe_is_calibrated_from_its_named_edges() {
+    use nanoforce::scene::{render_tool_into, tool_suite, ToolKind};
+    let dir = tempfile::tempdir().unwrap();
+    // A needle of the renderer's tool suite, with its clicks.
+    let session = &tool_suite(ToolKind::ALL[0], 41, 1, 2, 0)[0];
+    let mut reference = image::GrayImage::new(1, 1);
+    render_tool_into(&session.reference, &[], &mut reference);
+    let image = dir.path().join("needle.png");
+    reference.save(&image).unwrap();
+    let overlay = dir.path().join("needle-check.png");
+    let edge_args: Vec<String> = session
+        .clicks
+        .iter()
+        .flat_map(|(name, points)| {
+            let points: Vec<String> = points
+                .iter()
+                .map(|p| format!("{:.2},{:.2}", p[0], p[1]))
+                .collect();
+            ["--edge".to_string(), format!("{name}={}", points.join(" "))]
+        })
+        .collect();
+    let calibrate = |apex: &str| {
+        Command::new(BIN)
+            .arg("calibrate")
+            .arg("--image")
+            .arg(&image)
+            .args(&edge_args)
+            .args(["--apex-edges", apex])
+            .args(["--overlay", overlay.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let apex = format!("{},{}", session.apex[0], session.apex[1]);
+    let out = calibrate(&apex);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let block = String::from_utf8(out.stdout).unwrap();
+    assert!(block.starts_with("[tracker.calibration]\n"), "{block}");
+    assert!(block.contains("\n[tracker.calibration.edges]\n"), "{block}");
+    for (name, _) in &session.clicks {
+        assert!(block.contains(&format!("\n{name} = [[")), "{name}: {block}");
+        assert!(block.contains(&format!("\n#   {name} ")), "{name}: {block}");
+    }
+    assert!(image::open(&overlay).is_ok(), "overlay written");
+    // The block is a probe's calibration: the reference reads zero, and without a
+    // cantilever there is no force.
+    let config = dir.path().join("needle.toml");
+    std::fs::write(&config, &block).unwrap();
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    std::fs::copy(&image, frames.join("ref.png")).unwrap();
+    let csv = dir.path().join("out.csv");
+    let out = Command::new(BIN)
+        .arg("replay")
+        .arg(&frames)
+        .arg("--config")
+        .arg(&config)
+        .arg("--csv")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[1], "1", "{text}");
+    let angle: f64 = row[2].parse().unwrap();
+    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    assert_eq!(row[3], "", "no cantilever, no force: {text}");
+    // An apex edge that is not among the named ones is named in the error.
+    let out = calibrate("upper,tip");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("apex edge \"tip\""), "{err}");
+    // So is an edge given twice.
+    let out = Command::new(BIN)
+        .arg("calibrate")
+        .arg("--image")
+        .arg(&image)
+        .args(&edge_args)
+        .args(&edge_args[..2])
+        .args(["--apex-edges", &apex])
+        .args(["--overlay", overlay.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("is given twice"), "{err}");
+}

@@ -1,5 +1,6 @@
 //! `nanoforce calibrate`: refines a person's clicks on the calibration frame and prints
-//! the `[tracker.calibration]` block, with an overlay PNG to check it by eye.
+//! the `[tracker.calibration]` block, with an overlay PNG to check it by eye: the AFM
+//! pyramid's three edges, or a rigid probe's named edges.
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -8,7 +9,10 @@ use clap::Args;
 
 use crate::config::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
 use crate::session::frames::load_gray;
-use crate::vision::{auto_calibrate, draw_calibration, Calibration, Edge};
+use crate::vision::{
+    auto_calibrate, calibrate_rigid, draw_calibration, draw_rigid_calibration, Calibration, Edge,
+    RigidTemplate, NAMED_EDGE_COLOURS,
+};
 
 /// Refine clicked tip edges on a reference frame; print the calibration block.
 #[derive(Debug, Args)]
@@ -28,32 +32,48 @@ the apex marked: look at it before a session.\n\n\
 With --auto, calibrate finds the three edges itself, from one pixel on or near the apex \
 (--apex X,Y), or, when the probe is the dominant body entering from a frame side, from \
 none; the block it prints holds the points it found on each edge as clicks. Check the \
-overlay all the more.",
+overlay all the more.\n\n\
+Any other rigid probe (a tungsten needle, a tipless cantilever, a gripper jaw) is \
+calibrated from two or more named straight edges, each given as --edge NAME=\"X,Y X,Y \
+...\", and --apex-edges naming the two that meet at its tip point. The block then holds \
+apex and [tracker.calibration.edges]; the overlay draws each edge in the colour the \
+block names.",
     after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
 --red 156.8,33.4 228.3,57.3 --blue 230.7,114.2 260.6,192.0 --green 282.5,199.8 314.8,142.9 \\\n      \
 --overlay calibration.png >> probe.toml\n  \
-nanoforce calibrate --image reference.png --auto --apex 270,214 >> probe.toml"
+nanoforce calibrate --image reference.png --auto --apex 270,214 >> probe.toml\n  \
+nanoforce calibrate --image needle.png --edge \"upper=120,210.5 260,236 400,261.5\" \\\n      \
+--edge \"lower=120,420 260,389.5 400,359\" --edge \"end=505,280 507.5,310 510,340\" \\\n      \
+--apex-edges upper,end >> needle.toml"
 )]
 pub struct CalibrateArgs {
     /// The reference frame (PNG, TIFF or PGM).
     #[arg(long, value_name = "FILE")]
     pub image: PathBuf,
     /// Pixels on the red edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present_any = ["auto", "edges"], value_parser = parse_point)]
     pub red: Vec<[f64; 2]>,
     /// Pixels on the blue edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present_any = ["auto", "edges"], value_parser = parse_point)]
     pub blue: Vec<[f64; 2]>,
     /// Pixels on the green edge, as X,Y (two or more).
-    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present = "auto", value_parser = parse_point)]
+    #[arg(long, value_name = "X,Y", num_args = 2.., required_unless_present_any = ["auto", "edges"], value_parser = parse_point)]
     pub green: Vec<[f64; 2]>,
     /// Find the three edges automatically: from the pixel given by --apex, or without
     /// it when the probe is the dominant body entering from a frame side.
-    #[arg(long, conflicts_with_all = ["red", "blue", "green"])]
+    #[arg(long, conflicts_with_all = ["red", "blue", "green", "edges"])]
     pub auto: bool,
     /// A pixel on or near the apex (blue meets green), as X,Y, for --auto.
     #[arg(long, value_name = "X,Y", requires = "auto", value_parser = parse_point)]
     pub apex: Option<[f64; 2]>,
+    /// A rigid probe's named edge and two or more pixels on it, as "NAME=X,Y X,Y ..."
+    /// (repeat for each edge, two or more; with --apex-edges).
+    #[arg(long = "edge", value_name = "NAME=X,Y X,Y...", requires = "apex_edges",
+          conflicts_with_all = ["red", "blue", "green"], value_parser = parse_named_edge)]
+    pub edges: Vec<(String, Vec<[f64; 2]>)>,
+    /// The two named edges that meet at the rigid probe's tip point, as A,B.
+    #[arg(long, value_name = "A,B", requires = "edges", value_parser = parse_apex_edges)]
+    pub apex_edges: Option<[String; 2]>,
     /// Where to write the overlay (default: calibration-overlay.png beside the image).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
@@ -88,6 +108,42 @@ fn parse_point(s: &str) -> Result<[f64; 2], String> {
     Ok([parse(x)?, parse(y)?])
 }
 
+/// A name is what TOML takes as a bare key: letters, digits, `_` and `-`.
+fn parse_name(name: &str) -> Result<String, String> {
+    let name = name.trim();
+    if name.is_empty()
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Err(format!(
+            "{name:?} is not an edge name (letters, digits, _ and -)"
+        ));
+    }
+    Ok(name.to_string())
+}
+
+fn parse_named_edge(s: &str) -> Result<(String, Vec<[f64; 2]>), String> {
+    let (name, points) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?} is not NAME=X,Y X,Y ..."))?;
+    let points = points
+        .split_whitespace()
+        .map(parse_point)
+        .collect::<Result<Vec<_>, _>>()?;
+    if points.len() < 2 {
+        return Err(format!("{s:?}: an edge needs two or more pixels"));
+    }
+    Ok((parse_name(name)?, points))
+}
+
+fn parse_apex_edges(s: &str) -> Result<[String; 2], String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("{s:?} is not A,B (two edge names)"))?;
+    Ok([parse_name(a)?, parse_name(b)?])
+}
+
 fn parse_threshold(s: &str) -> Result<Threshold, String> {
     if s.eq_ignore_ascii_case("otsu") {
         return Ok(Threshold::Otsu);
@@ -116,6 +172,9 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
             "--window-deg must be {window}, as [tracker] window_deg; got {}",
             args.window_deg
         );
+    }
+    if let Some(apex) = &args.apex_edges {
+        return calibrate_named(&args, &reference, apex, &overlay_path);
     }
     let tracker = TrackerConfig {
         threshold: args.threshold,
@@ -151,6 +210,126 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
         overlay_path.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A rigid probe's calibration from its named edges: the block printed, the overlay
+/// written.
+fn calibrate_named(
+    args: &CalibrateArgs,
+    reference: &image::GrayImage,
+    apex: &[String; 2],
+    overlay_path: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
+    let clicks = CalibrationConfig {
+        reference_image: args.image.clone(),
+        edges: args.edges.clone(),
+        apex: Some(apex.clone()),
+    };
+    let clicked = clicks.clone().counted_from(args.pixel_origin);
+    let template = calibrate_rigid(
+        reference,
+        &clicked.edges,
+        [apex[0].as_str(), apex[1].as_str()],
+    )
+    .with_context(|| format!("calibrating on {}", args.image.display()))?;
+    print!("{}", named_block(&clicks, &template, args.pixel_origin));
+    draw_rigid_calibration(reference, &template)
+        .save(overlay_path)
+        .with_context(|| format!("writing {}", overlay_path.display()))?;
+    eprintln!(
+        "overlay written to {}: check each named edge (in the colour the block names) and \
+         the apex",
+        overlay_path.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A line's direction, degrees CCW on screen, in (-90, 90].
+fn line_deg(d: [f64; 2]) -> f64 {
+    let deg = (-d[1]).atan2(d[0]).to_degrees();
+    if deg > 90.0 {
+        deg - 180.0
+    } else if deg <= -90.0 {
+        deg + 180.0
+    } else {
+        deg
+    }
+}
+
+/// A rigid probe's `[tracker.calibration]` block: the apex edges and each edge's
+/// clicks (as given, counted from `origin`) as keys; what the reference shows of each
+/// edge as comments.
+pub fn named_block(
+    clicks: &CalibrationConfig,
+    template: &RigidTemplate,
+    origin: PixelOrigin,
+) -> String {
+    let points = CalibrationConfig::toml_points;
+    let name = clicks.reference_image.file_name().map_or_else(
+        || clicks.reference_image.display().to_string(),
+        |n| n.to_string_lossy().to_string(),
+    );
+    let mut out =
+        format!("[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n");
+    let [a, b] = template.apex_edges.map(|k| clicks.edges[k].0.as_str());
+    out.push_str(&format!(
+        "apex = [{a:?}, {b:?}]          # the tip point: where these two edges meet\n\
+         [tracker.calibration.edges]\n"
+    ));
+    for (edge, clicked) in &clicks.edges {
+        out.push_str(&format!("{edge} = {}\n", points(clicked)));
+    }
+    out.push_str(
+        "# Refined on the reference image: each edge's direction (degrees, CCW on screen),\n\
+         # the clicks' own direction, the probe's side and its step (grey levels), the\n\
+         # length the reference shows, and the colour the overlay draws it in:\n",
+    );
+    for ((edge, clicked), (fitted, (colour, _))) in clicks
+        .edges
+        .iter()
+        .zip(template.edges.iter().zip(NAMED_EDGE_COLOURS))
+    {
+        // Along the edge: its normal turned a quarter.
+        let refined = line_deg([fitted.normal[1], -fitted.normal[0]]);
+        let (p, q) = (clicked[0], clicked[clicked.len() - 1]);
+        let by_clicks = line_deg([q[0] - p[0], q[1] - p[1]]);
+        let mut off = by_clicks - refined;
+        if off > 90.0 {
+            off -= 180.0;
+        } else if off <= -90.0 {
+            off += 180.0;
+        }
+        let side = if fitted.polarity > 0.0 {
+            "brighter"
+        } else {
+            "darker"
+        };
+        let open = match fitted.open {
+            [false, false] => "",
+            _ => ", runs on out of the frame",
+        };
+        out.push_str(&format!(
+            "#   {edge:<8} {refined:>8.3}   (clicks {by_clicks:>8.3}, {off:+.3})   {side} \
+             ({:+.0})   {:.0} px{open}   {colour}\n",
+            fitted.polarity * fitted.step,
+            fitted.length()
+        ));
+    }
+    let apex = origin.output(template.apex);
+    out.push_str(&format!(
+        "# Apex ({a} meets {b}): ({:.2}, {:.2}) px\n\
+         # The reference's own edges leave each frame's rotation +- {:.4} deg\n",
+        apex[0],
+        apex[1],
+        template.angle_sigma_rad.to_degrees()
+    ));
+    if origin != PixelOrigin::Centre {
+        out.push_str(&format!(
+            "# Pixels counted from the top-left pixel's {origin}: \
+             [tracker] needs pixel_origin = \"{origin}\"\n"
+        ));
+    }
+    out
 }
 
 /// The `[tracker.calibration]` block: clicks (as given, counted from `origin`) as keys,

@@ -68,7 +68,9 @@ pub use options::{
     CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
     PYRAMID_EDGES,
 };
-pub use overlay::{draw_calibration, draw_overlay, draw_overlays};
+pub use overlay::{
+    draw_calibration, draw_overlay, draw_overlays, draw_rigid_calibration, NAMED_EDGE_COLOURS,
+};
 pub use probes::{
     refuse_scale_outliers, refuse_shared_tips, Claim, ProbeSet, MAX_PROBES, SECOND_TRACKING_THREAD,
     SINGLE_NAME,

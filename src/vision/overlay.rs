@@ -1,14 +1,29 @@
 //! Pictures for people: the frame with the found edges drawn in red, blue and green and
 //! the apex marked (the paper's Figure 8), and the same for a calibration on its
-//! reference image. Not used in the hot path.
+//! reference image, the AFM pyramid's or a rigid probe's named edges. Not used in the
+//! hot path.
 
 use image::{GrayImage, Rgb, RgbImage};
 use imageproc::drawing::{draw_hollow_circle_mut, draw_line_segment_mut};
 
+use super::rigid::{RigidTemplate, MAX_EDGES};
 use super::{Calibration, Edge, Estimate};
 
 const COLOURS: [Rgb<u8>; 3] = [Rgb([255, 40, 40]), Rgb([60, 110, 255]), Rgb([40, 220, 60])];
 const APEX: Rgb<u8> = Rgb([255, 230, 0]);
+
+/// The colours a rigid probe's named edges are drawn in, in the calibration's order,
+/// with the words `nanoforce calibrate` names them by (the apex is marked in yellow).
+pub const NAMED_EDGE_COLOURS: [(&str, Rgb<u8>); MAX_EDGES] = [
+    ("red", Rgb([255, 40, 40])),
+    ("blue", Rgb([60, 110, 255])),
+    ("green", Rgb([40, 220, 60])),
+    ("magenta", Rgb([230, 60, 230])),
+    ("cyan", Rgb([40, 220, 230])),
+    ("orange", Rgb([255, 150, 30])),
+    ("purple", Rgb([150, 80, 255])),
+    ("white", Rgb([255, 255, 255])),
+];
 
 /// The frame in colour with the estimate's edges and apex drawn over it.
 pub fn draw_overlay(frame: &GrayImage, estimate: &Estimate) -> RgbImage {
@@ -44,6 +59,26 @@ pub fn draw_calibration(reference: &GrayImage, calibration: &Calibration) -> Rgb
         thick_segment(&mut out, seg[0], seg[1], COLOURS[e.index()]);
     }
     mark(&mut out, calibration.apex_px());
+    out
+}
+
+/// The reference frame in colour with a rigid probe's calibrated edges drawn over it,
+/// each along the stretch the reference shows, bowed as calibrated, in its colour of
+/// [`NAMED_EDGE_COLOURS`], and the apex marked.
+pub fn draw_rigid_calibration(reference: &GrayImage, template: &RigidTemplate) -> RgbImage {
+    const PIECES: usize = 16;
+    let mut out = to_rgb(reference);
+    for (edge, (_, colour)) in template.edges.iter().zip(NAMED_EDGE_COLOURS) {
+        let at = |k: usize| {
+            let tau = edge.extent[0] + edge.length() * k as f64 / PIECES as f64;
+            let p = edge.point(tau);
+            [template.apex[0] + p[0], template.apex[1] + p[1]]
+        };
+        for k in 0..PIECES {
+            thick_segment(&mut out, at(k), at(k + 1), colour);
+        }
+    }
+    mark(&mut out, template.apex);
     out
 }
 

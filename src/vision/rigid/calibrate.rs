@@ -11,7 +11,7 @@
 use image::GrayImage;
 
 use super::station::Stations;
-use super::{RigidEdge, RigidError, RigidTemplate};
+use super::{RigidEdge, RigidError, RigidTemplate, MAX_EDGES};
 use crate::vision::geometry::{add, along, dot, norm, principal_axis, scale, sub, unit, Line};
 use crate::vision::EdgeName;
 
@@ -63,6 +63,16 @@ pub fn calibrate(
 ) -> Result<RigidTemplate, RigidError> {
     if edges.len() < 2 {
         return Err(RigidError::TooFewEdges(edges.len()));
+    }
+    if edges.len() > MAX_EDGES {
+        return Err(RigidError::TooManyEdges(edges.len()));
+    }
+    if let Some((name, _)) = edges
+        .iter()
+        .enumerate()
+        .find_map(|(k, e)| edges[..k].iter().any(|(n, _)| *n == e.0).then_some(e))
+    {
+        return Err(RigidError::EdgeNamedTwice(name.clone()));
     }
     let index = |name: &str| {
         edges

@@ -119,6 +119,10 @@ impl Pose {
 pub enum RigidError {
     #[error("calibration: a rigid probe needs at least 2 named edges, {0} given")]
     TooFewEdges(usize),
+    #[error("calibration: a rigid probe has at most {MAX_EDGES} named edges, {0} given")]
+    TooManyEdges(usize),
+    #[error("calibration: edge \"{0}\" is given twice")]
+    EdgeNamedTwice(String),
     #[error("calibration: apex edge \"{0}\" is not one of the named edges")]
     UnknownApexEdge(String),
     #[error("calibration: the apex needs two different edges; \"{0}\" is given twice")]
