@@ -21,6 +21,38 @@ fn calibrate(dir: &Path, extra: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Replays `reference` alone with a probe.toml of `config` text (in `dir`); the
+/// results row's fields.
+fn replay_reference(dir: &Path, config: &str, reference: &Path) -> Vec<String> {
+    let path = dir.join("probe.toml");
+    std::fs::write(&path, config).unwrap();
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    std::fs::copy(reference, frames.join("ref.png")).unwrap();
+    let csv = dir.join("out.csv");
+    let out = Command::new(BIN)
+        .arg("replay")
+        .arg(&frames)
+        .arg("--config")
+        .arg(&path)
+        .arg("--csv")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    text.lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(String::from)
+        .collect()
+}
+
 #[test]
 fn printed_block_calibrates_and_the_reference_reads_zero() {
     let dir = tempfile::tempdir().unwrap();
@@ -42,32 +74,11 @@ fn printed_block_calibrates_and_the_reference_reads_zero() {
     // Whether the beam's thickness was measured, and what follows when not.
     assert!(block.contains("\n# Beam thickness"), "{block}");
     assert!(image::open(&overlay).is_ok(), "overlay written");
-    let config = dir.path().join("probe.toml");
-    std::fs::write(
-        &config,
-        format!("[cantilever]\nlength_um = 434.675\nspring_constant_n_per_m = 0.06\n\n{block}"),
-    )
-    .unwrap();
-    let frames = dir.path().join("frames");
-    std::fs::create_dir(&frames).unwrap();
-    std::fs::copy(dir.path().join("reference.png"), frames.join("ref.png")).unwrap();
-    let csv = dir.path().join("out.csv");
-    let out = Command::new(BIN)
-        .arg("replay")
-        .arg(&frames)
-        .arg("--config")
-        .arg(&config)
-        .arg("--csv")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let row = replay_reference(
+        dir.path(),
+        &format!("[cantilever]\nlength_um = 434.675\nspring_constant_n_per_m = 0.06\n\n{block}"),
+        &dir.path().join("reference.png"),
     );
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
     assert_eq!(row[1], "1");
     let angle: f64 = row[2].parse().unwrap();
     // Calibration refines each edge on its own; tracking fits them jointly, with the
@@ -300,32 +311,11 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
     assert!(image::open(&overlay).is_ok(), "overlay written");
     // The block is a probe's calibration: the reference reads zero, and without a
     // cantilever there is no force.
-    let config = dir.path().join("needle.toml");
-    std::fs::write(&config, &block).unwrap();
-    let frames = dir.path().join("frames");
-    std::fs::create_dir(&frames).unwrap();
-    std::fs::copy(&image, frames.join("ref.png")).unwrap();
-    let csv = dir.path().join("out.csv");
-    let out = Command::new(BIN)
-        .arg("replay")
-        .arg(&frames)
-        .arg("--config")
-        .arg(&config)
-        .arg("--csv")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
-    assert_eq!(row[1], "1", "{text}");
+    let row = replay_reference(dir.path(), &block, &image);
+    assert_eq!(row[1], "1", "{row:?}");
     let angle: f64 = row[2].parse().unwrap();
     assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
-    assert_eq!(row[3], "", "no cantilever, no force: {text}");
+    assert_eq!(row[3], "", "no cantilever, no force: {row:?}");
     // An apex edge that is not among the named ones is named in the error.
     let out = calibrate("upper,tip");
     let err = String::from_utf8_lossy(&out.stderr);

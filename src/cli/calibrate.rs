@@ -256,6 +256,15 @@ fn line_deg(d: [f64; 2]) -> f64 {
     }
 }
 
+/// The block's first lines: the section and the reference image, by its file name.
+fn block_head(clicks: &CalibrationConfig) -> String {
+    let name = clicks.reference_image.file_name().map_or_else(
+        || clicks.reference_image.display().to_string(),
+        |n| n.to_string_lossy().to_string(),
+    );
+    format!("[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n")
+}
+
 /// A rigid probe's `[tracker.calibration]` block: the apex edges and each edge's
 /// clicks (as given, counted from `origin`) as keys; what the reference shows of each
 /// edge as comments.
@@ -265,12 +274,7 @@ pub fn named_block(
     origin: PixelOrigin,
 ) -> String {
     let points = CalibrationConfig::toml_points;
-    let name = clicks.reference_image.file_name().map_or_else(
-        || clicks.reference_image.display().to_string(),
-        |n| n.to_string_lossy().to_string(),
-    );
-    let mut out =
-        format!("[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n");
+    let mut out = block_head(clicks);
     let [a, b] = template.apex_edges.map(|k| clicks.edges[k].0.as_str());
     out.push_str(&format!(
         "apex = [{a:?}, {b:?}]          # the tip point: where these two edges meet\n\
@@ -340,12 +344,7 @@ pub fn calibration_block(
     origin: PixelOrigin,
 ) -> String {
     let points = CalibrationConfig::toml_points;
-    let name = clicks.reference_image.file_name().map_or_else(
-        || clicks.reference_image.display().to_string(),
-        |n| n.to_string_lossy().to_string(),
-    );
-    let mut out =
-        format!("[tracker.calibration]\nreference_image = {name:?}  # relative to probe.toml\n");
+    let mut out = block_head(clicks);
     for (edge, clicked) in &clicks.edges {
         out.push_str(&format!("{edge} = {}\n", points(clicked)));
     }
