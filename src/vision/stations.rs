@@ -466,6 +466,12 @@ pub fn check_edges(
         let level = p.inside_level();
         (lo, hi) = (lo.min(level), hi.max(level));
     }
+    // A tip too small at its scale for either face to be checked (each under about
+    // 30 px: MIN_CHECKED_PX beyond the corner's and the base's trims) shows nothing
+    // that makes it this probe; a free-end corner of another body passes for one.
+    if corners == 0 {
+        return Some(Miss::ScaleMismatch);
+    }
     // The tip is hidden when no face shows it at the apex; one face may lose its
     // corner to a particle or a bright substrate beside it while the other holds.
     if corners > 0 && hidden == corners {
@@ -1201,6 +1207,23 @@ mod tests {
         // No beam: no line anywhere the beam edge could lie.
         let bare = probe_frame(&t, &truth, 190.0, false);
         assert_eq!(beam_edge_scale(&bare, &t, &truth, 1.0, 150.0), None);
+    }
+
+    #[test]
+    fn a_tip_too_small_to_check_its_faces_is_refused() {
+        let t = Template {
+            beam_px: Some(10.0),
+            ..super::super::template::toy()
+        };
+        // Faces of 50 reference pixels at a scale of 0.4: 20 px each.
+        let pose = Pose {
+            psi: 0.0,
+            scale: 0.4,
+            apex: [220.0, 250.0],
+        };
+        let frame = probe_frame(&t, &pose, 0.0, true);
+        let miss = check_edges(&frame, &t, &pose, 1.0, &[150.0; 3], [true; 3]);
+        assert_eq!(miss, Some(Miss::ScaleMismatch));
     }
 
     #[test]
