@@ -52,20 +52,38 @@ fn streamed_steadily(s: &RunStats) -> bool {
     s.frames.dropped == 0 && s.haptic_loop.rate_hz > 990.0
 }
 
-/// Runs `config` for 12 s as `one_twelve_second_run` does, and once more when the host
-/// stalled the first run (frames dropped, or the haptic loop off its 1 kHz: a SCHED_FIFO
-/// thread on a virtual machine misses wake-ups by milliseconds when the host takes the
-/// CPU, and /proc/stat's steal does not always see it). A daemon that misses its targets
-/// misses them twice.
+/// Runs `config` for 12 s as `one_twelve_second_run` does, and once more when the first
+/// run missed a timing target ([`timing_met`]: frames dropped, or the haptic loop off
+/// its 1 kHz: a SCHED_FIFO thread on a virtual machine misses wake-ups by milliseconds
+/// when the host takes the CPU, and /proc/stat's steal does not always see it). A
+/// daemon that misses its targets misses them twice.
 fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
     let run = one_twelve_second_run(config);
-    let s = &run.0;
-    if streamed_steadily(s) && s.haptic_loop.period_us_p99.is_some_and(|p99| p99 <= 1100.0) {
+    if timing_met(&run.0) {
         return run;
     }
     eprintln!("the host stalled the run, running it again");
     one_twelve_second_run(config)
 }
+
+/// Whether a run met the timing targets [`assert_timing_targets`] checks on a host
+/// that leaves the run alone: no frame dropped, frame latency p99 <= 5 ms, the loop at
+/// 1000 +- 5 Hz with its period p99 within 1000 +- 100 us.
+fn timing_met(s: &RunStats) -> bool {
+    let (f, l) = (&s.frames, &s.haptic_loop);
+    f.dropped == 0
+        && f.latency_ms_p99
+            .is_some_and(|p99| p99 <= MAX_LATENCY_P99_MS)
+        && (l.rate_hz - 1000.0).abs() < MAX_RATE_OFF_HZ
+        && l.period_us_p99
+            .is_some_and(|p99| (1000.0 - MAX_P99_OFF_US..=1000.0 + MAX_P99_OFF_US).contains(&p99))
+}
+
+/// The timing targets: frame latency p99, the loop's rate off 1 kHz, its period p99
+/// off 1000 us.
+const MAX_LATENCY_P99_MS: f64 = 5.0;
+const MAX_RATE_OFF_HZ: f64 = 5.0;
+const MAX_P99_OFF_US: f64 = 100.0;
 
 /// Runs `config` for 12 s, recorded: one press to 3 uN and the hold (approach, press,
 /// hold, into the retract). Returns its stats, the session folder, the host's steal
@@ -161,11 +179,14 @@ fn assert_timing_targets(s: &RunStats, steal: f64, realtime: bool) {
         return;
     }
     assert_eq!(f.dropped, 0, "the tracker keeps up: {f:?}");
-    assert!(f.latency_ms_p99.unwrap() <= 5.0, "frame latency p99: {f:?}");
-    assert!((l.rate_hz - 1000.0).abs() < 5.0, "{l:?}");
+    assert!(
+        f.latency_ms_p99.unwrap() <= MAX_LATENCY_P99_MS,
+        "frame latency p99: {f:?}"
+    );
+    assert!((l.rate_hz - 1000.0).abs() < MAX_RATE_OFF_HZ, "{l:?}");
     let p99 = l.period_us_p99.unwrap();
     assert!(
-        (900.0..=1100.0).contains(&p99),
+        (p99 - 1000.0).abs() <= MAX_P99_OFF_US,
         "haptic period p99 {p99} us"
     );
 }
