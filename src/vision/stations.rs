@@ -1171,6 +1171,14 @@ mod tests {
 
     /// The probe of `t` at `pose` (200) on 50, its pyramid drawn only below
     /// `pyramid_from_y` (faces fading into the ground above), its beam only if `beam`.
+    /// The toy pyramid under a beam 10 reference pixels thick.
+    fn toy_under_beam() -> Template {
+        Template {
+            beam_px: Some(10.0),
+            ..super::super::template::toy()
+        }
+    }
+
     fn probe_frame(t: &Template, pose: &Pose, pyramid_from_y: f64, beam: bool) -> GrayImage {
         let lines = [RED, BLUE, GREEN].map(|e| t.line(pose, e));
         let (free, far) = t.segment(pose, RED);
@@ -1190,11 +1198,7 @@ mod tests {
 
     #[test]
     fn the_beam_edge_is_found_at_its_own_scale() {
-        // The toy pyramid under a beam 10 reference pixels thick.
-        let t = Template {
-            beam_px: Some(10.0),
-            ..super::super::template::toy()
-        };
+        let t = toy_under_beam();
         let truth = Pose {
             psi: 0.02,
             scale: 2.5,
@@ -1222,10 +1226,7 @@ mod tests {
 
     #[test]
     fn a_tip_too_small_to_check_its_faces_is_refused() {
-        let t = Template {
-            beam_px: Some(10.0),
-            ..super::super::template::toy()
-        };
+        let t = toy_under_beam();
         // Faces of 50 reference pixels at a scale of 0.4: 20 px each.
         let pose = Pose {
             psi: 0.0,
@@ -1239,11 +1240,8 @@ mod tests {
 
     #[test]
     fn a_face_leaving_the_frame_must_run_to_the_border() {
-        // The toy pyramid at a scale that puts its faces' bases 100 px above the frame.
-        let t = Template {
-            beam_px: Some(10.0),
-            ..super::super::template::toy()
-        };
+        // At a scale that puts its faces' bases 100 px above the frame.
+        let t = toy_under_beam();
         let pose = Pose {
             psi: 0.0,
             scale: 8.0,
