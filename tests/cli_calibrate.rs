@@ -335,4 +335,20 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("is given twice"), "{err}");
+    // The pyramid's threshold plays no part in a rigid calibration: refused, not
+    // silently ignored.
+    let out = Command::new(BIN)
+        .arg("calibrate")
+        .arg("--image")
+        .arg(&image)
+        .args(&edge_args)
+        .args(["--apex-edges", &apex, "--threshold", "100"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--threshold") && err.contains("cannot be used with"),
+        "{err}"
+    );
 }

@@ -77,11 +77,12 @@ pub struct CalibrateArgs {
     /// Where to write the overlay (default: calibration-overlay.png beside the image).
     #[arg(long, value_name = "FILE")]
     pub overlay: Option<PathBuf>,
-    /// Binarisation level 0..=255 or "otsu", as [tracker] threshold.
-    #[arg(long, default_value = "otsu", value_parser = parse_threshold)]
+    /// Binarisation level 0..=255 or "otsu", as [tracker] threshold (the pyramid's
+    /// calibration only).
+    #[arg(long, default_value = "otsu", value_parser = parse_threshold, conflicts_with = "edges")]
     pub threshold: Threshold,
     /// Search half-window, degrees, as [tracker] window_deg.
-    #[arg(long, default_value_t = DEFAULT_WINDOW_DEG)]
+    #[arg(long, default_value_t = DEFAULT_WINDOW_DEG, conflicts_with = "edges")]
     pub window_deg: f64,
     /// Where the clicks (and the printed apex) count pixels from: "centre" (the default:
     /// the top-left pixel's centre is 0,0) or "corner" (its corner is; ImageJ), as
