@@ -283,19 +283,25 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
             ["--edge".to_string(), format!("{name}={}", points.join(" "))]
         })
         .collect();
-    let calibrate = |apex: &str| {
+    let calibrate = |extra: &[&str]| {
         Command::new(BIN)
             .arg("calibrate")
             .arg("--image")
             .arg(&image)
             .args(&edge_args)
-            .args(["--apex-edges", apex])
             .args(["--overlay", overlay.to_str().unwrap()])
+            .args(extra)
             .output()
             .unwrap()
     };
+    // A refused calibration's message.
+    let refused = |extra: &[&str]| {
+        let out = calibrate(extra);
+        assert!(!out.status.success(), "{extra:?} refused");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
     let apex = format!("{},{}", session.apex[0], session.apex[1]);
-    let out = calibrate(&apex);
+    let out = calibrate(&["--apex-edges", &apex]);
     assert!(
         out.status.success(),
         "{}",
@@ -317,36 +323,14 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
     assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
     assert_eq!(row[3], "", "no cantilever, no force: {row:?}");
     // An apex edge that is not among the named ones is named in the error.
-    let out = calibrate("upper,tip");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = refused(&["--apex-edges", "upper,tip"]);
     assert!(err.contains("apex edge \"tip\""), "{err}");
     // So is an edge given twice.
-    let out = Command::new(BIN)
-        .arg("calibrate")
-        .arg("--image")
-        .arg(&image)
-        .args(&edge_args)
-        .args(&edge_args[..2])
-        .args(["--apex-edges", &apex])
-        .args(["--overlay", overlay.to_str().unwrap()])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = refused(&[&edge_args[0], &edge_args[1], "--apex-edges", &apex]);
     assert!(err.contains("is given twice"), "{err}");
     // The pyramid's threshold plays no part in a rigid calibration: refused, not
     // silently ignored.
-    let out = Command::new(BIN)
-        .arg("calibrate")
-        .arg("--image")
-        .arg(&image)
-        .args(&edge_args)
-        .args(["--apex-edges", &apex, "--threshold", "100"])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = refused(&["--apex-edges", &apex, "--threshold", "100"]);
     assert!(
         err.contains("--threshold") && err.contains("cannot be used with"),
         "{err}"

@@ -247,7 +247,11 @@ fn calibrate_named(
 
 /// A line's direction, degrees CCW on screen, in (-90, 90].
 fn line_deg(d: [f64; 2]) -> f64 {
-    let deg = (-d[1]).atan2(d[0]).to_degrees();
+    half_turn((-d[1]).atan2(d[0]).to_degrees())
+}
+
+/// An angle between lines, degrees, brought into (-90, 90].
+fn half_turn(deg: f64) -> f64 {
     if deg > 90.0 {
         deg - 180.0
     } else if deg <= -90.0 {
@@ -298,12 +302,7 @@ pub fn named_block(
         let refined = line_deg([fitted.normal[1], -fitted.normal[0]]);
         let (p, q) = (clicked[0], clicked[clicked.len() - 1]);
         let by_clicks = line_deg([q[0] - p[0], q[1] - p[1]]);
-        let mut off = by_clicks - refined;
-        if off > 90.0 {
-            off -= 180.0;
-        } else if off <= -90.0 {
-            off += 180.0;
-        }
+        let off = half_turn(by_clicks - refined);
         let side = if fitted.polarity > 0.0 {
             "brighter"
         } else {

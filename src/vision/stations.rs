@@ -215,6 +215,11 @@ impl Profile {
 
 /// Where the line from `origin` along `dir` runs at least `pad` pixels inside a frame
 /// of `size`: its interval of distances along `dir`.
+/// Whether `p` lies in a frame of `size` at least `pad` pixels from its border pixels.
+fn inside_frame(p: [f64; 2], size: [f64; 2], pad: f64) -> bool {
+    p[0] >= pad && p[1] >= pad && p[0] <= size[0] - 1.0 - pad && p[1] <= size[1] - 1.0 - pad
+}
+
 fn clip_inside(origin: [f64; 2], dir: [f64; 2], size: [f64; 2], pad: f64) -> Option<(f64, f64)> {
     clip_to_rect(
         origin,
@@ -391,10 +396,13 @@ pub fn check_edges(
     // The faces whose corner is in view, for the turned-face check.
     let mut faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
     let mut shown_step = [1.0; 3];
+    // The far end of each edge's station span.
+    let mut far_end = [None; 3];
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
         };
+        far_end[e] = Some(b);
         if e == RED && !corner {
             continue;
         }
@@ -411,12 +419,7 @@ pub fn check_edges(
             // frame (a beam along the border may lie just beyond it).
             let slack = (RED_SLACK * line.depth(pose.apex).abs()).ceil() as i64;
             let pad = s.reach() + 1.0;
-            let inside = |p: [f64; 2]| {
-                p[0] >= pad
-                    && p[1] >= pad
-                    && p[0] <= size[0] - 1.0 - pad
-                    && p[1] <= size[1] - 1.0 - pad
-            };
+            let inside = |p: [f64; 2]| inside_frame(p, size, pad);
             let shifted =
                 |p: [f64; 2], k: f64| [p[0] + k * line.normal[0], p[1] + k * line.normal[1]];
             let sure = [-1.0, 1.0].iter().all(|&sign| {
@@ -485,7 +488,10 @@ pub fn check_edges(
     }
     // A face the pose places to leave the frame must run to the border.
     for e in [BLUE, GREEN] {
-        if runs_out(frame, t, pose, e, size, &s, calibrated[e], shown_step[e]) {
+        let Some(b) = far_end[e] else {
+            continue;
+        };
+        if runs_out(frame, t, pose, e, b, size, &s, calibrated[e], shown_step[e]) {
             return Some(Miss::EdgeMissing(Edge::ALL[e].into()));
         }
     }
@@ -835,7 +841,11 @@ fn step_end(
     step: f64,
     shown: f64,
 ) -> Option<f64> {
-    let p = profile(frame, line, span, None, s, step);
+    located_end(&profile(frame, line, span, None, s, step), shown)
+}
+
+/// Where profile `p`'s step stops showing, as a share of its span ([`step_end`]).
+fn located_end(p: &Profile, shown: f64) -> Option<f64> {
     if p.stations < STATIONS {
         return None;
     }
@@ -873,37 +883,26 @@ const RUN_SLACK: f64 = 0.2;
 /// view instead: its step stops more than [`RUN_SLACK`] of its length in view short
 /// of the border, and beyond that end the probe's side leaves the probe's level on
 /// some station (the body ends, not only the step).
+/// `b` is the far end of the face's station span ([`station_span`]).
 #[allow(clippy::too_many_arguments)]
 fn runs_out(
     frame: &GrayImage,
     t: &Template,
     pose: &Pose,
     e: usize,
+    b: [f64; 2],
     size: [f64; 2],
     s: &Sampling,
     step: f64,
     shown: f64,
 ) -> bool {
-    let Some((_, b, _)) = station_span(t, pose, e, size, s) else {
-        return false;
-    };
     let (tip, base) = t.segment(pose, e);
-    let pad = s.reach() + 1.0;
-    let in_view = |p: [f64; 2]| {
-        p[0] >= pad && p[1] >= pad && p[0] <= size[0] - 1.0 - pad && p[1] <= size[1] - 1.0 - pad
-    };
-    let len = norm(sub(b, tip));
-    if in_view(base) || len < 1e-9 {
+    if inside_frame(base, size, s.reach() + 1.0) || norm(sub(b, tip)) < 1e-9 {
         return false;
     }
     let from = add(tip, scale(sub(b, tip), 1.0 - RUN_SPAN));
-    let line = t.line(pose, e);
-    let p = profile(frame, &line, (from, b), None, s, step);
-    if p.stations < STATIONS {
-        return false;
-    }
-    let located = LOCATED_RATIO * shown.clamp(END_SHOWN_MIN, 1.0);
-    let Some(j) = split(|k| p.ratio[k] >= located) else {
+    let p = profile(frame, &t.line(pose, e), (from, b), None, s, step);
+    let Some(j) = located_end(&p, shown) else {
         return false;
     };
     if RUN_SPAN * (1.0 - j) <= RUN_SLACK {
@@ -1250,7 +1249,11 @@ mod tests {
         let s = Sampling::new(1.0, 80.0);
         let runs_out_from = |pyramid_from_y: f64| {
             let frame = probe_frame(&t, &pose, pyramid_from_y, false);
-            [BLUE, GREEN].map(|e| runs_out(&frame, &t, &pose, e, [400.0, 300.0], &s, 150.0, 1.0))
+            let size = [400.0, 300.0];
+            [BLUE, GREEN].map(|e| {
+                let (_, b, _) = station_span(&t, &pose, e, size, &s).unwrap();
+                runs_out(&frame, &t, &pose, e, b, size, &s, 150.0, 1.0)
+            })
         };
         // To the border, and ending a tenth of their 250 px in view short of it.
         assert_eq!(runs_out_from(0.0), [false, false]);
