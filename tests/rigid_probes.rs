@@ -14,7 +14,7 @@ mod tracker_support;
 
 use image::GrayImage;
 use nanoforce::scene::{render_tool_into, tool_suite, ToolKind, ToolSession};
-use nanoforce::vision::{calibrate_rigid, Estimate, RigidTracker, DEFAULT_WINDOW_DEG};
+use nanoforce::vision::{calibrate_rigid, Estimate, RigidPose, RigidTracker, DEFAULT_WINDOW_DEG};
 use tracker_support::rendered::real_crops;
 
 /// Sessions per kind and frames per session: 16 x 20 = 320 frames, about 300 in view.
@@ -33,6 +33,9 @@ struct Measured {
     apex_errors: Vec<f64>,
     ratios: Vec<f64>,
     misses: Vec<String>,
+    /// Misses that the fit from the true pose refuses too: the verification's, not
+    /// the search's.
+    refused_at_truth: usize,
 }
 
 fn quantile(v: &[f64], q: f64) -> f64 {
@@ -102,10 +105,21 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
                     spec.magnification / session.reference.magnification
                 );
             }
+            let truth_pose = RigidPose {
+                psi: -truth.angle_deg.to_radians(),
+                scale: spec.magnification / session.reference.magnification,
+                apex: truth.apex_px,
+            };
+            let at_truth = tracker.track_from(&frame, truth_pose);
+            out.refused_at_truth += usize::from(!at_truth.detected);
             out.misses.push(format!(
-                "{} frame {k}: {}",
+                "{} frame {k}: {} ({})",
                 session.kind.name(),
-                e.miss.map_or("", |m| m.name())
+                e.miss.map_or("", |m| m.name()),
+                match at_truth.miss {
+                    Some(m) => format!("from the true pose too: {}", m.name()),
+                    None => "by the search: the true pose verifies".into(),
+                }
             ));
             continue;
         }
@@ -169,6 +183,12 @@ fn measure(kind: ToolKind) -> Measured {
         quantile(&m.apex_errors, 0.5),
         quantile(&m.ratios, 0.5),
         m.ratios.iter().filter(|r| **r > 4.0).count()
+    );
+    println!(
+        "{}: {} missed, {} of them refused from the true pose too",
+        kind.name(),
+        m.misses.len(),
+        m.refused_at_truth
     );
     for miss in &m.misses {
         println!("  missed {miss}");

@@ -249,6 +249,23 @@ impl RigidTracker {
             }
         }
     }
+
+    /// The estimate of `frame` fitted and verified from `pose` alone, with no search
+    /// and no change to the tracker's state: whether a pose known from elsewhere (a
+    /// rendered frame's truth) passes verification, which tells a frame the search
+    /// missed from one the verification refuses.
+    pub fn track_from(&mut self, frame: &GrayImage, pose: Pose) -> Estimate {
+        if frame.width() < MIN_FRAME_PX || frame.height() < MIN_FRAME_PX {
+            return Estimate::missed(Miss::NoCandidates, 0.0);
+        }
+        match self
+            .fitter
+            .fit(frame, &self.template, pose, self.window_rad)
+        {
+            Ok(fit) => estimate(&self.template, &fit),
+            Err((miss, confidence)) => Estimate::missed(miss, confidence),
+        }
+    }
 }
 
 /// Frames narrower or lower than this, pixels, show no probe to track.
@@ -391,6 +408,20 @@ mod tests {
         }
         let blank = needle(0.0, [-500.0, -500.0], 8.0, 3);
         assert!(!tracker.track(&blank).detected);
+        // From a known pose: verified where the needle is, refused where it is not.
+        let at = [240.0, 104.0];
+        let frame = needle(6.0, at, 8.0, 4);
+        let truth = Pose {
+            psi: image_rad_from_screen_deg(6.0),
+            scale: 1.0,
+            apex: at,
+        };
+        let e = tracker.track_from(&frame, truth);
+        assert!(
+            e.detected && (e.angle_deg.unwrap() - 6.0).abs() < 0.05,
+            "{e:?}"
+        );
+        assert!(!tracker.track_from(&blank, truth).detected);
         for (w, h) in [(1, 1), (3, 2), (16, 16), (17, 300)] {
             let tiny = GrayImage::from_pixel(w, h, image::Luma([128]));
             assert!(!tracker.track(&tiny).detected, "{w}x{h}");
