@@ -160,6 +160,10 @@ pub fn calibrate(
                 lo = lo.min(0.0);
                 hi = hi.max(0.0);
             }
+            // The body lies on the probe's side of every other edge's line: a trace
+            // that ran on past one (over background that carries its step on) ends
+            // where it crosses that line, at a corner.
+            let clipped = overshoot(f, &found, k, apex_px, &mut lo, &mut hi);
             // A closed end lies at a corner: where the nearest other edge's line crosses
             // this one beyond the traced end, within the edge's length (a stretch of
             // background as bright as the probe can stop a trace short of it).
@@ -176,8 +180,9 @@ pub fn calibrate(
             let at_apex = |t: f64| apex_edges.contains(&k) && t == 0.0;
             // An end at no corner (a trace stopped by the background, or by the frame's
             // border) says nothing of where the edge ends: it is open.
-            let mut open = [true; 2];
-            if !f.open[0] {
+            let mut open = clipped.map(|c| !c);
+            if clipped[0] {
+            } else if !f.open[0] {
                 if at_apex(lo) {
                     open[0] = false;
                 } else if let Some(t) = crossings()
@@ -188,7 +193,8 @@ pub fn calibrate(
                     open[0] = false;
                 }
             }
-            if !f.open[1] {
+            if clipped[1] {
+            } else if !f.open[1] {
                 if at_apex(hi) {
                     open[1] = false;
                 } else if let Some(t) = crossings()
@@ -223,6 +229,40 @@ pub fn calibrate(
         apex_edges,
         angle_sigma_rad: information.recip().sqrt(),
     })
+}
+
+/// Clips edge `k`'s traced extent `lo..hi` (positions along it from the apex's foot)
+/// at another edge's line that a traced end lies more than [`CORNER_SLACK_PX`] beyond,
+/// on the side away from the probe; which ends were clipped.
+fn overshoot(
+    f: &Found,
+    found: &[Found],
+    k: usize,
+    apex_px: [f64; 2],
+    lo: &mut f64,
+    hi: &mut f64,
+) -> [bool; 2] {
+    let tangent = along(f.line.normal);
+    let foot = f.line.foot(apex_px);
+    let at = |t: f64| add(foot, scale(tangent, t));
+    let mut clipped = [false; 2];
+    for (_, g) in found.iter().enumerate().filter(|(j, _)| *j != k) {
+        let Some(p) = f.line.intersect(&g.line) else {
+            continue;
+        };
+        let t = dot(tangent, sub(p, apex_px));
+        if !(*lo < t && t < *hi) {
+            continue;
+        }
+        if g.line.depth(at(*lo)) < -CORNER_SLACK_PX {
+            *lo = t;
+            clipped[0] = true;
+        } else if g.line.depth(at(*hi)) < -CORNER_SLACK_PX {
+            *hi = t;
+            clipped[1] = true;
+        }
+    }
+    clipped
 }
 
 /// Finds one edge near `clicks`, its probe side toward `others`.

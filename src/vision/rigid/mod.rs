@@ -321,7 +321,8 @@ fn estimate(t: &RigidTemplate, fit: &Fit) -> Estimate {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::geometry::{image_rad_from_screen_deg, sub};
+    use crate::vision::geometry::{dot, image_rad_from_screen_deg, sub};
+    use crate::vision::Line;
 
     /// A blunt needle entering from the left: flanks from far left to a 12 px end face
     /// whose upper corner is the apex, rotated by `deg` (screen) about the apex at
@@ -364,6 +365,48 @@ mod tests {
                 .clamp(0.0, 255.0)
                 .round() as u8])
         })
+    }
+
+    /// A reference whose lower flank's step carries on past the blunt end: a band of
+    /// background (150, between the probe's 180 and the 60 around it) beyond the end
+    /// face, above the lower flank's line.
+    #[test]
+    fn an_edge_traced_past_a_corner_ends_at_the_corner() {
+        let apex = [250.0, 100.0];
+        let mut reference = needle(0.0, apex, 2.0, 1);
+        // The lower flank's line, continued past the end face: y = 12 - 0.12 x.
+        for y in 60..125u32 {
+            for x in 251..320u32 {
+                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+                if dy < 12.0 - 0.12 * dx {
+                    reference.put_pixel(x, y, image::Luma([150]));
+                }
+            }
+        }
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let lower = &template.edges[1];
+        let end = &template.edges[2];
+        // Where the lower flank meets the end face, along the lower flank.
+        let corner = Line {
+            normal: lower.normal,
+            rho: lower.offset,
+        }
+        .intersect(&Line {
+            normal: end.normal,
+            rho: end.offset,
+        })
+        .map(|p| dot(along(lower.normal), p))
+        .unwrap();
+        let near = if lower.extent[0].abs() < lower.extent[1].abs() {
+            0
+        } else {
+            1
+        };
+        assert!(!lower.open[near], "{lower:?}");
+        assert!(
+            (lower.extent[near] - corner).abs() < 1.0,
+            "{lower:?} corner {corner}"
+        );
     }
 
     fn clicks(apex: [f64; 2]) -> Vec<(String, Vec<[f64; 2]>)> {
