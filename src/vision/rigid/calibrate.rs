@@ -10,6 +10,7 @@
 
 use image::GrayImage;
 
+use super::fit::{MAX_STATIONS, SPACING_PX as STATION_SPACING_PX};
 use super::station::Stations;
 use super::{RigidEdge, RigidError, RigidTemplate, MAX_EDGES};
 use crate::vision::geometry::{add, along, dot, norm, principal_axis, scale, sub, unit, Line};
@@ -144,7 +145,7 @@ pub fn calibrate(
     let mut steps: Vec<f64> = found.iter().map(|f| f.step).collect();
     steps.sort_by(f64::total_cmp);
     let typical_step = steps[steps.len() / 2];
-    let template_edges = edges
+    let template_edges: Vec<RigidEdge> = edges
         .iter()
         .zip(&found)
         .enumerate()
@@ -222,12 +223,30 @@ pub fn calibrate(
             }
         })
         .collect();
-    let information: f64 = found.iter().map(|f| f.angle_sigma.powi(-2)).sum();
+    // A frame's fit weighs each edge by its stations' moment about their middle, not
+    // by the reference's sigma: each edge's error on the reference enters the frame's
+    // rotation with that weight.
+    let moments: Vec<f64> = template_edges
+        .iter()
+        .map(|e| {
+            let stations =
+                ((e.length() / STATION_SPACING_PX).floor() + 1.0).min(MAX_STATIONS as f64);
+            stations * e.length().powi(2)
+        })
+        .collect();
+    let total: f64 = moments.iter().sum();
+    let angle_sigma_rad = found
+        .iter()
+        .zip(&moments)
+        .map(|(f, m)| (m * f.angle_sigma).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / total;
     Ok(RigidTemplate {
         edges: template_edges,
         apex: apex_px,
         apex_edges,
-        angle_sigma_rad: information.recip().sqrt(),
+        angle_sigma_rad,
     })
 }
 

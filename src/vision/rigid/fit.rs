@@ -30,8 +30,8 @@ const REACHES: [f64; 4] = [8.0, 4.0, 2.5, 2.0];
 /// Gauss-Newton steps per pass.
 const STEPS_PER_PASS: usize = 2;
 /// Station spacing along an edge, frame pixels, and the most stations per edge.
-const SPACING_PX: f64 = 5.0;
-const MAX_STATIONS: usize = 48;
+pub(super) const SPACING_PX: f64 = 5.0;
+pub(super) const MAX_STATIONS: usize = 48;
 /// Passes reaching farther than this (frame pixels) read at most [`COARSE_STATIONS`]
 /// per edge: they only bring the pose within the fine passes' reach.
 const FINE_REACH_PX: f64 = 3.0;
