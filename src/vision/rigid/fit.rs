@@ -56,10 +56,6 @@ const ABANDON_SHARE: f64 = 0.4;
 /// An edge is in view when at least this many of its stations are, and this share.
 const MIN_IN_VIEW: usize = 3;
 const IN_VIEW_SHARE: f64 = 0.25;
-/// The median step of an edge is at least this share of its calibrated step (with its
-/// sign). A larger step is no sign of another body: over a textured background the
-/// level outside the probe changes as it moves.
-const MIN_STEP_RATIO: f64 = 0.3;
 /// Stations checked beyond a closed end, at these distances past it, frame pixels;
 /// more than one holding means the edge runs on.
 const BEYOND_PX: [f64; 3] = [4.0, 8.0, 12.0];
@@ -410,7 +406,11 @@ impl Fitter {
                 // two: the share would ask for all three, and one in three is the
                 // noise's.
                 refusal = Some(Miss::EdgeMissing(edge.name));
-            } else if median_ratio < MIN_STEP_RATIO {
+            } else if median_ratio < HOLD_SHARE {
+                // Its median station steps too little to hold it. The yardstick is the
+                // reference's step, and a face against a brighter background than on
+                // the reference steps by less; a larger step is no sign of another
+                // body either, as the level outside the probe changes as it moves.
                 refusal = Some(Miss::WrongAppearance(edge.name));
             } else if is_apex_edge && !self.apex_held(t, &pose, e) {
                 refusal = Some(Miss::EdgeMissing(edge.name));
