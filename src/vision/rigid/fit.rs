@@ -57,7 +57,8 @@ const ABANDON_SHARE: f64 = 0.4;
 const MIN_IN_VIEW: usize = 3;
 const IN_VIEW_SHARE: f64 = 0.25;
 /// Stations checked beyond a closed end, at these distances past it, frame pixels;
-/// more than one holding means the edge runs on.
+/// all of them holding means the edge runs on (a particle beside the corner makes
+/// two of them step on the line's side under noise; an edge that goes on makes all).
 const BEYOND_PX: [f64; 3] = [4.0, 8.0, 12.0];
 /// Floor of the residuals' scale in the Huber weights, pixels.
 const MIN_SCALE_PX: f64 = 0.2;
@@ -462,7 +463,7 @@ impl Fitter {
         held[0] && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
     }
 
-    /// More than one station past a closed end of edge `e` holds it.
+    /// Every station past a closed end of edge `e` holds it.
     fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
         let edge = &t.edges[e];
         let past = |end: usize| {
@@ -473,6 +474,6 @@ impl Fitter {
                 .filter(|p| p.step >= RUN_ON_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX)
                 .count()
         };
-        (0..2).any(|end| !edge.open[end] && past(end) > 1)
+        (0..2).any(|end| !edge.open[end] && past(end) == BEYOND_PX.len())
     }
 }

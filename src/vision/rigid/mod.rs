@@ -409,6 +409,30 @@ mod tests {
         );
     }
 
+    /// A frame whose lower flank runs on 30 px past the blunt end, as a strip 6 px
+    /// thick (a longer probe's): refused as a scale mismatch, where the same needle
+    /// without the strip is detected.
+    #[test]
+    fn a_flank_running_on_past_its_corner_is_refused() {
+        let apex = [250.0, 100.0];
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let mut frame = needle(0.0, apex, 4.0, 2);
+        assert!(tracker.track(&frame).detected);
+        for y in 80..125u32 {
+            for x in 251..281u32 {
+                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+                let lower = 12.0 - 0.12 * dx;
+                if dy < lower && dy >= lower - 6.0 {
+                    frame.put_pixel(x, y, image::Luma([180]));
+                }
+            }
+        }
+        let e = tracker.track(&frame);
+        assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
+    }
+
     fn clicks(apex: [f64; 2]) -> Vec<(String, Vec<[f64; 2]>)> {
         let on = |a: [f64; 2], b: [f64; 2]| {
             (1..4)
