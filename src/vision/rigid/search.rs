@@ -29,10 +29,11 @@ const MIN_VOTES: f32 = 12.0;
 const MIN_PEAK_VOTES: f32 = 4.0;
 /// A detection pixel supports a line within this distance when its gradient is
 /// within this angle of the line's, and a run of support bridges this many pixels
-/// without it.
+/// without it (a particle or scratch across the edge, 8 frame pixels at the usual
+/// binning; twice that joins an edge to lines beyond its end).
 const RUN_HALF_WIDTH: i32 = 1;
 const RUN_ANGLE_RAD: f64 = 0.35;
-const RUN_GAP: usize = 2;
+const RUN_GAP: usize = 4;
 /// Placements handed to the fit, best first.
 pub const MAX_PLACEMENTS: usize = 6;
 /// Placements this close in rotation (bins) and apex (detection pixels) are one.
