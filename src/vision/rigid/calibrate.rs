@@ -182,8 +182,7 @@ pub fn calibrate(
             // An end at no corner (a trace stopped by the background, or by the frame's
             // border) says nothing of where the edge ends: it is open.
             let mut open = clipped.map(|c| !c);
-            if clipped[0] {
-            } else if !f.open[0] {
+            if !clipped[0] && !f.open[0] {
                 if at_apex(lo) {
                     open[0] = false;
                 } else if let Some(t) = crossings()
@@ -194,8 +193,7 @@ pub fn calibrate(
                     open[0] = false;
                 }
             }
-            if clipped[1] {
-            } else if !f.open[1] {
+            if !clipped[1] && !f.open[1] {
                 if at_apex(hi) {
                     open[1] = false;
                 } else if let Some(t) = crossings()
