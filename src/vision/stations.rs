@@ -213,13 +213,13 @@ impl Profile {
     }
 }
 
-/// Where the line from `origin` along `dir` runs at least `pad` pixels inside a frame
-/// of `size`: its interval of distances along `dir`.
 /// Whether `p` lies in a frame of `size` at least `pad` pixels from its border pixels.
 fn inside_frame(p: [f64; 2], size: [f64; 2], pad: f64) -> bool {
     p[0] >= pad && p[1] >= pad && p[0] <= size[0] - 1.0 - pad && p[1] <= size[1] - 1.0 - pad
 }
 
+/// Where the line from `origin` along `dir` runs at least `pad` pixels inside a frame
+/// of `size`: its interval of distances along `dir`.
 fn clip_inside(origin: [f64; 2], dir: [f64; 2], size: [f64; 2], pad: f64) -> Option<(f64, f64)> {
     clip_to_rect(
         origin,
@@ -1168,8 +1168,6 @@ fn locate_end(
 mod tests {
     use super::*;
 
-    /// The probe of `t` at `pose` (200) on 50, its pyramid drawn only below
-    /// `pyramid_from_y` (faces fading into the ground above), its beam only if `beam`.
     /// The toy pyramid under a beam 10 reference pixels thick.
     fn toy_under_beam() -> Template {
         Template {
@@ -1178,6 +1176,8 @@ mod tests {
         }
     }
 
+    /// The probe of `t` at `pose` (200) on 50, its pyramid drawn only below
+    /// `pyramid_from_y` (faces fading into the ground above), its beam only if `beam`.
     fn probe_frame(t: &Template, pose: &Pose, pyramid_from_y: f64, beam: bool) -> GrayImage {
         let lines = [RED, BLUE, GREEN].map(|e| t.line(pose, e));
         let (free, far) = t.segment(pose, RED);

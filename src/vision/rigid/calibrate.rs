@@ -10,7 +10,7 @@
 
 use image::GrayImage;
 
-use super::fit::{MAX_STATIONS, SPACING_PX as STATION_SPACING_PX};
+use super::fit::{stations_along, MAX_STATIONS};
 use super::station::Stations;
 use super::{RigidEdge, RigidError, RigidTemplate, MAX_EDGES};
 use crate::vision::geometry::{add, along, dot, norm, principal_axis, scale, sub, unit, Line};
@@ -226,11 +226,7 @@ pub fn calibrate(
     // rotation with that weight.
     let moments: Vec<f64> = template_edges
         .iter()
-        .map(|e| {
-            let stations =
-                ((e.length() / STATION_SPACING_PX).floor() + 1.0).min(MAX_STATIONS as f64);
-            stations * e.length().powi(2)
-        })
+        .map(|e| stations_along(e.length()).min(MAX_STATIONS) as f64 * e.length().powi(2))
         .collect();
     let total: f64 = moments.iter().sum();
     let angle_sigma_rad = found

@@ -10,9 +10,9 @@
 //!
 //! Verification then asks of the last pass's stations what `super` promises: every
 //! edge in view holds its calibrated step at [`HELD_SHARE`] of its stations (all but
-//! one of three) and at the apex, its median step has the calibrated sign and about
-//! the calibrated size, no edge runs on past an end where the reference shows it
-//! ending, and the apex, rotation and scale lie in range.
+//! one of three) and at the apex, its median station holds it, no edge runs on past
+//! an end where the reference shows it ending, and the apex, rotation and scale lie in
+//! range.
 
 use image::GrayImage;
 use nalgebra::{Matrix4, Vector4};
@@ -30,8 +30,14 @@ const REACHES: [f64; 4] = [8.0, 4.0, 2.5, 2.0];
 /// Gauss-Newton steps per pass.
 const STEPS_PER_PASS: usize = 2;
 /// Station spacing along an edge, frame pixels, and the most stations per edge.
-pub(super) const SPACING_PX: f64 = 5.0;
+const SPACING_PX: f64 = 5.0;
 pub(super) const MAX_STATIONS: usize = 48;
+
+/// Stations one per [`SPACING_PX`] along `length_px` frame pixels of an edge, both
+/// ends included (before the bounds a pass puts on them).
+pub(super) fn stations_along(length_px: f64) -> usize {
+    (length_px / SPACING_PX).floor() as usize + 1
+}
 /// Passes reaching farther than this (frame pixels) read at most [`COARSE_STATIONS`]
 /// per edge: they only bring the pose within the fine passes' reach.
 const FINE_REACH_PX: f64 = 3.0;
@@ -229,8 +235,7 @@ impl Fitter {
             if hi <= lo {
                 continue;
             }
-            let count = (((hi - lo) * pose.scale / SPACING_PX).floor() as usize + 1)
-                .clamp(MIN_IN_VIEW, most);
+            let count = stations_along((hi - lo) * pose.scale).clamp(MIN_IN_VIEW, most);
             for k in 0..count {
                 let tau = lo + (hi - lo) * k as f64 / (count - 1) as f64;
                 let q = pose.place(edge, tau);
