@@ -7,14 +7,20 @@
 //! deg; the reported standard error covers the error (median |error| / sigma in
 //! 0.5-0.9, at most 0.5 % beyond 4 sigma).
 //!
+//! Each tracker searches the scales a lab would state for these sessions
+//! (`tracker.scale_range`, see `scales`).
+//!
 //! `TOOL_SEED` picks another suite (the committed bounds hold on the default seed; a
 //! held-out seed is the check that they are not tuned to it).
 
 mod tracker_support;
 
 use image::GrayImage;
-use nanoforce::scene::{render_tool_into, tool_suite, ToolKind, ToolSession};
-use nanoforce::vision::{calibrate_rigid, Estimate, RigidPose, RigidTracker, DEFAULT_WINDOW_DEG};
+use nanoforce::scene::{render_tool_into, tool_suite, ToolKind, ToolSession, TOOL_MAG_RATIO};
+use nanoforce::vision::{
+    calibrate_rigid, Estimate, RigidPose, RigidTracker, ScaleRange, DEFAULT_WINDOW_DEG,
+    RIGID_SCALES,
+};
 use tracker_support::rendered::real_crops;
 
 /// Sessions per kind and frames per session: 16 x 20 = 320 frames, about 300 in view.
@@ -36,6 +42,17 @@ struct Measured {
     /// Misses that the fit from the true pose refuses too: the verification's, not
     /// the search's.
     refused_at_truth: usize,
+}
+
+/// The scales the lab states (`tracker.scale_range`): the suite's magnifications over
+/// the reference's, known to the lab to 10 %. `TOOL_SCALES=widest` searches the
+/// widest range instead, which cannot tell a needle from a jaw of its taper at half
+/// the size.
+fn scales() -> ScaleRange {
+    match std::env::var("TOOL_SCALES").as_deref() {
+        Ok("widest") => RIGID_SCALES,
+        _ => ScaleRange::new(TOOL_MAG_RATIO[0] / 1.1, TOOL_MAG_RATIO[1] * 1.1),
+    }
 }
 
 fn quantile(v: &[f64], q: f64) -> f64 {
@@ -75,7 +92,9 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
                 .collect::<Vec<_>>()
         );
     }
-    let mut tracker = RigidTracker::new(template, DEFAULT_WINDOW_DEG);
+    let mut tracker = RigidTracker::new(template, DEFAULT_WINDOW_DEG)
+        .with_scales(scales())
+        .unwrap();
     let only: Option<usize> = std::env::var("ONLY_FRAME")
         .ok()
         .and_then(|s| s.parse().ok());
@@ -91,6 +110,12 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
         }
         let e: Estimate = tracker.track(&frame);
         if !truth.in_view {
+            if e.detected && std::env::var("RIGID_DEBUG").is_ok() {
+                println!(
+                    "   false on blank frame {k}: scale {:.3}",
+                    e.scale.unwrap_or(f64::NAN)
+                );
+            }
             out.false_detections += usize::from(e.detected);
             continue;
         }
@@ -141,10 +166,20 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
             .push((a[0] - truth.apex_px[0]).hypot(a[1] - truth.apex_px[1]));
     }
     for other in others {
-        for spec in &other.frames {
+        for (k, spec) in other.frames.iter().enumerate() {
             render_tool_into(spec, crops, &mut frame);
             out.other_tools += 1;
-            out.false_detections += usize::from(tracker.track(&frame).detected);
+            let e = tracker.track(&frame);
+            if e.detected && std::env::var("RIGID_DEBUG").is_ok() {
+                println!(
+                    "   false on a {} frame {k}: scale {:.3} angle {:.2} confidence {:.2}",
+                    other.kind.name(),
+                    e.scale.unwrap_or(f64::NAN),
+                    e.angle_deg.unwrap_or(f64::NAN),
+                    e.confidence
+                );
+            }
+            out.false_detections += usize::from(e.detected);
         }
     }
 }
@@ -198,10 +233,9 @@ fn measure(kind: ToolKind) -> Measured {
 
 /// Bounds measured on the default seed (and the held-out seed 97), below the issue's
 /// targets where the tracker does not reach them yet (docs/tracker.md, "Rigid probes
-/// of named edges"): detection 97.7-98.7 % (held-out 98.3-99.3 %), one gripper
-/// placed on another tool's frame, up to 0.7 % of detections beyond 4 sigma.
+/// of named edges"): detection 97.7-98.7 % (held-out 98.3-99.3 %), no false
+/// detection at the scales the lab states, up to 0.7 % of detections beyond 4 sigma.
 const MIN_DETECTION: f64 = 0.96;
-const MAX_FALSE: usize = 1;
 const MAX_BEYOND_4_SIGMA: f64 = 0.007;
 
 fn check(kind: ToolKind) {
@@ -219,7 +253,7 @@ fn check(kind: ToolKind) {
         kind.name()
     );
     assert!(
-        m.false_detections <= MAX_FALSE,
+        m.false_detections == 0,
         "{}: {} false",
         kind.name(),
         m.false_detections

@@ -13,7 +13,10 @@ mod tracker_support;
 
 use image::Rgb;
 use nanoforce::config::PixelOrigin;
-use nanoforce::vision::{draw_calibration, draw_overlay, Calibration, Edge, Tracker, VisionError};
+use nanoforce::vision::{
+    draw_calibration, draw_overlay, Calibration, Edge, Estimate, Miss, ScaleRange, Tracker,
+    TrackerConfig, VisionError,
+};
 use tracker_support::{angle_rms_deg, percentile, result_csv, sample, score, table, Session};
 
 #[test]
@@ -285,4 +288,34 @@ fn overlays_draw_the_edges_in_their_colours() {
             == Rgb([255, 230, 0])
     });
     assert!(ring, "apex marker");
+}
+
+/// `tracker.scale_range` on the AFM pyramid: a range around the sample's own scales
+/// keeps every detection, a range above them refuses every frame as a scale mismatch.
+#[test]
+fn a_stated_scale_range_keeps_the_probe_and_refuses_other_sizes() {
+    let s = sample("sequence");
+    let cfg = s.config.probes[0].tracker.clone();
+    let found = s.run_with(&cfg, false);
+    let scales: Vec<f64> = found.iter().filter_map(|e| e.scale).collect();
+    assert!(!scales.is_empty());
+    let lo = scales.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = scales.iter().copied().fold(0.0, f64::max);
+    let around = TrackerConfig {
+        scale_range: Some(ScaleRange::new(0.95 * lo, 1.05 * hi)),
+        ..cfg.clone()
+    };
+    let kept = s.run_with(&around, false);
+    let detected = |v: &[Estimate]| v.iter().filter(|e| e.detected).count();
+    assert_eq!(detected(&kept), detected(&found));
+    let above = TrackerConfig {
+        scale_range: Some(ScaleRange::new(1.3 * hi, 2.0 * hi)),
+        ..cfg
+    };
+    for (e, was) in s.run_with(&above, false).iter().zip(&found) {
+        assert!(!e.detected, "{e:?}");
+        if was.detected {
+            assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
+        }
+    }
 }

@@ -265,6 +265,37 @@ green = [[282.5, 199.8], [298.4, 170.9], [314.8, 142.9]]
     }
 
     #[test]
+    fn scale_range_is_two_scales_running_upward() {
+        let with = |line: &str| {
+            parse(&SAMPLE.replace(
+                "window_deg = 20.0\n",
+                &format!("window_deg = 20.0\n{line}\n"),
+            ))
+        };
+        assert_eq!(parse(SAMPLE).unwrap().probes[0].tracker.scale_range, None);
+        let cfg = with("scale_range = [0.8, 1.25]").unwrap();
+        assert_eq!(
+            cfg.probes[0].tracker.scale_range,
+            Some(crate::vision::ScaleRange::new(0.8, 1.25))
+        );
+        let msg = with("scale_range = [1.25, 0.8]").unwrap_err().to_string();
+        assert!(
+            msg.contains("tracker.scale_range must run upward") && msg.ends_with("[1.25, 0.8]"),
+            "{msg}"
+        );
+        let msg = with("scale_range = [0.01, 2]").unwrap_err().to_string();
+        assert!(
+            msg.ends_with("tracker.scale_range[0] = 0.01 is out of range: accepted 0.05 to 12"),
+            "{msg}"
+        );
+        let msg = with("scale_range = [0.5, 1, 2]").unwrap_err().to_string();
+        assert!(
+            msg.contains("scale_range") && msg.contains("2 items"),
+            "{msg}"
+        );
+    }
+
+    #[test]
     fn negative_length_names_file_key_and_value() {
         let msg = error_of("[cantilever]\nlength_um = -3\nspring_constant_n_per_m = 1\n");
         assert_eq!(

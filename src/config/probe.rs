@@ -7,13 +7,13 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::checks::{Checker, ConfigError, Range};
+use crate::checks::{Checker, ConfigError, List, Range};
 use crate::hw::config::RawDevice;
 use crate::model::Cantilever;
 use crate::sim::config::{RawSimProbe, SimProbe};
 use crate::vision::{
-    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGES,
-    MAX_EDGE_BIAS_PX, PYRAMID_EDGES,
+    CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG,
+    MAX_EDGES, MAX_EDGE_BIAS_PX, PYRAMID_EDGES,
 };
 pub use crate::vision::{MAX_PROBES, SINGLE_NAME};
 
@@ -31,6 +31,9 @@ const THICKNESS_UM: Range = Range::new(0.1, 20.0, "um");
 /// 1 degree no deflection fits in the window.
 pub const WINDOW_DEG: Range = Range::new(1.0, 45.0, "deg");
 const EDGE_BIAS_PX: Range = Range::new(-MAX_EDGE_BIAS_PX, MAX_EDGE_BIAS_PX, "px");
+/// `tracker.scale_range`'s bounds: frame pixels per reference pixel, the widest any
+/// probe's search covers.
+const SCALE: Range = Range::new(0.05, 12.0, "");
 /// A click lies in a frame, and a frame is at most 16384 pixels wide (`frames.width`).
 const CLICK_PX: Range = Range::new(-0.5, 16384.0, "px");
 /// Longest probe name, characters (it names files: `out.<name>.csv`).
@@ -85,6 +88,7 @@ pub(super) struct RawTracker {
     window_deg: Option<f64>,
     pixel_origin: Option<String>,
     edge_bias_px: Option<f64>,
+    scale_range: Option<List<f64, 2>>,
     calibration: Option<RawCalibration>,
 }
 
@@ -386,6 +390,10 @@ impl Section<'_> {
             0.0,
             EDGE_BIAS_PX,
         )?;
+        let scale_range = raw
+            .scale_range
+            .map(|List([lo, hi])| self.scale_range(lo, hi))
+            .transpose()?;
         let calibration = raw
             .calibration
             .map(|c| self.calibration(c, pixel_origin))
@@ -395,8 +403,24 @@ impl Section<'_> {
             window_deg,
             pixel_origin,
             edge_bias_px,
+            scale_range,
             calibration,
         })
+    }
+
+    /// `tracker.scale_range`: two scales in [`SCALE`], the first below the second.
+    fn scale_range(&self, lo: f64, hi: f64) -> Result<ScaleRange, ConfigError> {
+        let key = self.key("tracker.scale_range");
+        self.check.number(&format!("{key}[0]"), lo, SCALE)?;
+        self.check.number(&format!("{key}[1]"), hi, SCALE)?;
+        if lo >= hi {
+            return Err(self.invalid(
+                "tracker.scale_range",
+                ScaleRange::new(lo, hi),
+                "must run upward: [smallest, largest] scale",
+            ));
+        }
+        Ok(ScaleRange::new(lo, hi))
     }
 
     fn calibration(

@@ -38,7 +38,7 @@ const CLICK_BOUND_PX: f64 = 0.4;
 /// Largest rotation of a frame from the reference, degrees.
 const MAX_ANGLE_DEG: f64 = 15.0;
 /// Range of a frame's magnification over the reference's.
-const MAG_RATIO: [f64; 2] = [0.8, 1.25];
+pub const MAG_RATIO: [f64; 2] = [0.8, 1.25];
 /// Range of the reference's magnification.
 const REFERENCE_MAG: [f64; 2] = [1500.0, 4000.0];
 /// Share of each edge's visible length in the reference, from its apex end, that every

@@ -65,8 +65,8 @@ pub use autocal::{auto_calibrate, clicks_from_apex, find_apex, AutoCalError, Aut
 pub use calibration::{CalibratedEdge, Calibration};
 pub use geometry::Line;
 pub use options::{
-    CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG, MAX_EDGE_BIAS_PX,
-    PYRAMID_EDGES,
+    CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG,
+    MAX_EDGE_BIAS_PX, PYRAMID_EDGES,
 };
 pub use overlay::{
     draw_calibration, draw_overlay, draw_overlays, draw_rigid_calibration, NAMED_EDGE_COLOURS,
@@ -77,7 +77,7 @@ pub use probes::{
 };
 pub use rigid::{
     calibrate as calibrate_rigid, Pose as RigidPose, RigidEdge, RigidError, RigidTemplate,
-    RigidTracker, MAX_EDGES,
+    RigidTracker, MAX_EDGES, RIGID_SCALES,
 };
 pub use simd::set_avx2;
 pub use tracker::Tracker;

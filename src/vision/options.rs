@@ -93,6 +93,9 @@ pub struct TrackerConfig {
     /// frame pixels; the apex is reported where the true faces meet. 0 reports where
     /// the imaged faces meet.
     pub edge_bias_px: f64,
+    /// The frames' magnification over the reference frame's, when the lab bounds it
+    /// (`tracker.scale_range`); none leaves the engine's own search range.
+    pub scale_range: Option<ScaleRange>,
     pub calibration: Option<CalibrationConfig>,
 }
 
@@ -103,8 +106,41 @@ impl Default for TrackerConfig {
             window_deg: DEFAULT_WINDOW_DEG,
             pixel_origin: PixelOrigin::Centre,
             edge_bias_px: 0.0,
+            scale_range: None,
             calibration: None,
         }
+    }
+}
+
+/// A range of a frame's scale over the reference's: frame pixels per reference pixel,
+/// which is the session's magnification over the reference frame's. The lab knows it
+/// from the SEM's settings, and it tells apart probes that differ mostly in size (a
+/// needle of a jaw's taper is that jaw at half the magnification).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleRange {
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl ScaleRange {
+    /// `lo` to `hi`, both included.
+    pub const fn new(lo: f64, hi: f64) -> ScaleRange {
+        ScaleRange { lo, hi }
+    }
+
+    pub fn contains(&self, scale: f64) -> bool {
+        (self.lo..=self.hi).contains(&scale)
+    }
+
+    /// Whether this range lies inside `outer`.
+    pub fn within(&self, outer: &ScaleRange) -> bool {
+        self.lo >= outer.lo && self.hi <= outer.hi
+    }
+}
+
+impl fmt::Display for ScaleRange {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "[{}, {}]", self.lo, self.hi)
     }
 }
 

@@ -22,10 +22,10 @@ use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
-use super::options::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig};
+use super::options::{CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Turns};
-use super::rigid::{calibrate as calibrate_rigid, RigidTemplate, RigidTracker};
+use super::rigid::{calibrate as calibrate_rigid, RigidError, RigidTemplate, RigidTracker};
 use super::stations;
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
@@ -157,6 +157,8 @@ pub struct PyramidTracker {
     cantilever: Option<Cantilever>,
     /// `tracker.edge_bias_px`: the reported apex is where the true faces meet.
     edge_bias_px: f64,
+    /// `tracker.scale_range`: a pose at another scale is not this probe.
+    scale_range: Option<ScaleRange>,
     /// `tracker.pixel_origin`, for whoever writes the estimates out.
     pixel_origin: PixelOrigin,
     coherence: bool,
@@ -192,6 +194,7 @@ impl PyramidTracker {
             tied,
             cantilever,
             edge_bias_px: cfg.edge_bias_px,
+            scale_range: cfg.scale_range,
             pixel_origin: cfg.pixel_origin,
             coherence: true,
             last: None,
@@ -567,7 +570,8 @@ impl PyramidTracker {
     }
 
     /// Why a refined tip is not this probe's, if it is not: the apex outside the
-    /// frame, the rotation outside the window (beyond its standard error), or an edge
+    /// frame, the rotation outside the window (beyond its standard error), the scale
+    /// outside `tracker.scale_range`, or an edge
     /// in view that the frame does not show as calibrated ([`stations::check_edges`]).
     fn refusal(
         &self,
@@ -585,6 +589,9 @@ impl PyramidTracker {
         let beyond = pose.psi.abs() - self.window_rad;
         if beyond > WINDOW_SIGMAS * fit.turn_sigma + WINDOW_SLACK_RAD {
             return Some(Miss::RotationOutside);
+        }
+        if self.scale_range.is_some_and(|r| !r.contains(pose.scale)) {
+            return Some(Miss::ScaleMismatch);
         }
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
         stations::check_edges(
@@ -693,21 +700,25 @@ impl Tracker {
     }
 
     /// A rigid probe's tracker; `cantilever` (a tipless cantilever's) turns its
-    /// rotation into a force.
+    /// rotation into a force. Refused when `tracker.scale_range` reaches beyond the
+    /// scales a rigid probe is searched over.
     pub fn rigid(
         cfg: &TrackerConfig,
         template: RigidTemplate,
         cantilever: Option<Cantilever>,
-    ) -> Tracker {
+    ) -> Result<Tracker, RigidError> {
         let mut tracker = RigidTracker::new(template, cfg.window_deg);
+        if let Some(scales) = cfg.scale_range {
+            tracker = tracker.with_scales(scales)?;
+        }
         tracker.set_coherence(true);
-        Tracker {
+        Ok(Tracker {
             engine: Engine::Rigid {
                 tracker: Box::new(tracker),
                 cantilever,
                 pixel_origin: cfg.pixel_origin,
             },
-        }
+        })
     }
 
     /// The tracker `clicks` calibrate on `reference`: the pyramid's for red, blue and
@@ -732,7 +743,7 @@ impl Tracker {
                     &clicks.edges,
                     [apex[0].as_str(), apex[1].as_str()],
                 )?;
-                Ok(Tracker::rigid(cfg, template, cantilever))
+                Ok(Tracker::rigid(cfg, template, cantilever)?)
             }
         }
     }

@@ -17,9 +17,8 @@
 use image::GrayImage;
 use nalgebra::{Matrix4, Vector4};
 
-use super::search::SCALES;
 use super::station::{Located, Stations};
-use super::{Pose, RigidTemplate};
+use super::{Bounds, Pose, RigidTemplate};
 use crate::vision::geometry::{add, dot, rotate, scale, sub};
 use crate::vision::Miss;
 
@@ -174,7 +173,7 @@ impl Fitter {
         frame: &GrayImage,
         template: &RigidTemplate,
         start: Pose,
-        window_rad: f64,
+        bounds: &Bounds,
     ) -> Result<Fit, (Miss, f64)> {
         let mut pose = start;
         let mut covariance = Matrix4::zeros();
@@ -198,7 +197,7 @@ impl Fitter {
                 pose = next;
                 covariance = cov;
             }
-            if !(SCALES.0..=SCALES.1).contains(&pose.scale) {
+            if !bounds.scales.contains(pose.scale) {
                 return Err((Miss::ScaleMismatch, 0.0));
             }
         }
@@ -212,7 +211,7 @@ impl Fitter {
         );
         let sigma =
             (covariance[(0, 0)].max(0.0).sqrt() * SIGMA_FACTOR).hypot(template.angle_sigma_rad);
-        self.verify(frame, template, pose, sigma, window_rad)
+        self.verify(frame, template, pose, sigma, bounds.window_rad)
     }
 
     /// Reads every edge's stations at `pose`; with `beyond`, also the stations past

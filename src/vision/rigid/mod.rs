@@ -26,7 +26,7 @@ pub use fit::MAX_EDGES;
 
 use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
 use super::pyramid::Pyramid;
-use super::{EdgeFit, EdgeName, Estimate, Miss};
+use super::{EdgeFit, EdgeName, Estimate, Miss, ScaleRange};
 use fit::{Fit, Fitter};
 use search::Search;
 
@@ -147,13 +147,29 @@ pub enum RigidError {
     ApexEdgesParallel { edges: [String; 2], angle_deg: f64 },
     #[error("calibration: the apex edges meet at {apex:?}, outside the reference image")]
     ApexOutside { apex: [f64; 2] },
+    #[error(
+        "tracker.scale_range = {0} must run upward inside {RIGID_SCALES}, the scales a \
+         rigid probe is searched over"
+    )]
+    ScaleRange(ScaleRange),
+}
+
+/// The widest range of scales a rigid probe is searched over, frame pixels per
+/// reference pixel; `tracker.scale_range` may narrow it.
+pub const RIGID_SCALES: ScaleRange = ScaleRange::new(0.5, 2.0);
+
+/// The poses a frame may show: the rotation's half-window and the scales.
+#[derive(Debug, Clone, Copy)]
+pub struct Bounds {
+    pub window_rad: f64,
+    pub scales: ScaleRange,
 }
 
 /// Tracks one rigid probe frame by frame. Buffers are kept between frames.
 #[derive(Debug)]
 pub struct RigidTracker {
     template: RigidTemplate,
-    window_rad: f64,
+    bounds: Bounds,
     pyramid: Pyramid,
     search: Search,
     fitter: Fitter,
@@ -163,11 +179,15 @@ pub struct RigidTracker {
 }
 
 impl RigidTracker {
-    /// A tracker of `template` whose rotation is searched within +-`window_deg`.
+    /// A tracker of `template` whose rotation is searched within +-`window_deg`, and
+    /// its scale over [`RIGID_SCALES`].
     pub fn new(template: RigidTemplate, window_deg: f64) -> RigidTracker {
         RigidTracker {
             template,
-            window_rad: window_deg.to_radians(),
+            bounds: Bounds {
+                window_rad: window_deg.to_radians(),
+                scales: RIGID_SCALES,
+            },
             pyramid: Pyramid::default(),
             search: Search::default(),
             fitter: Fitter::default(),
@@ -175,6 +195,16 @@ impl RigidTracker {
             last: None,
             coherence: false,
         }
+    }
+
+    /// Searches and accepts only scales in `scales`, which must lie inside
+    /// [`RIGID_SCALES`].
+    pub fn with_scales(mut self, scales: ScaleRange) -> Result<RigidTracker, RigidError> {
+        if !(scales.lo < scales.hi && scales.within(&RIGID_SCALES)) {
+            return Err(RigidError::ScaleRange(scales));
+        }
+        self.bounds.scales = scales;
+        Ok(self)
     }
 
     pub fn template(&self) -> &RigidTemplate {
@@ -203,7 +233,7 @@ impl RigidTracker {
             return Estimate::missed(Miss::NoCandidates, 0.0);
         }
         if let Some(prior) = self.last.filter(|_| self.coherence) {
-            if let Ok(fit) = self.fitter.fit(frame, t, prior, self.window_rad) {
+            if let Ok(fit) = self.fitter.fit(frame, t, prior, &self.bounds) {
                 let estimate = estimate(t, &fit);
                 self.last = Some(fit.pose);
                 return estimate;
@@ -212,7 +242,7 @@ impl RigidTracker {
         self.pyramid
             .build_binned(frame, search_binning(t, frame.width()));
         self.search
-            .placements(&self.pyramid, t, self.window_rad, &mut self.placements);
+            .placements(&self.pyramid, t, &self.bounds, &mut self.placements);
         if self.placements.is_empty() {
             self.last = None;
             return Estimate::missed(Miss::NoCandidates, 0.0);
@@ -220,7 +250,7 @@ impl RigidTracker {
         let mut best: Option<Fit> = None;
         let mut refusal: Option<(Miss, f64)> = None;
         for &placement in &self.placements {
-            match self.fitter.fit(frame, t, placement, self.window_rad) {
+            match self.fitter.fit(frame, t, placement, &self.bounds) {
                 Ok(fit) => {
                     let sure = fit.confidence >= SURE_CONFIDENCE;
                     if best.as_ref().is_none_or(|b| fit.confidence > b.confidence) {
@@ -258,10 +288,7 @@ impl RigidTracker {
         if frame.width() < MIN_FRAME_PX || frame.height() < MIN_FRAME_PX {
             return Estimate::missed(Miss::NoCandidates, 0.0);
         }
-        match self
-            .fitter
-            .fit(frame, &self.template, pose, self.window_rad)
-        {
+        match self.fitter.fit(frame, &self.template, pose, &self.bounds) {
             Ok(fit) => estimate(&self.template, &fit),
             Err((miss, confidence)) => Estimate::missed(miss, confidence),
         }
@@ -431,6 +458,35 @@ mod tests {
         }
         let e = tracker.track(&frame);
         assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
+    }
+
+    /// A needle at the reference's size is detected over the widest scales and over
+    /// [0.8, 1.25], and refused over [1.3, 2]: a probe of its shape at another size is
+    /// not this probe. A range reaching beyond the search's is refused.
+    #[test]
+    fn a_stated_scale_range_refuses_other_sizes() {
+        let apex = [250.0, 100.0];
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let frame = needle(3.0, [240.0, 104.0], 4.0, 2);
+        for (scales, detected) in [
+            (RIGID_SCALES, true),
+            (ScaleRange::new(0.8, 1.25), true),
+            (ScaleRange::new(1.3, 2.0), false),
+        ] {
+            let mut tracker = RigidTracker::new(template.clone(), 20.0)
+                .with_scales(scales)
+                .unwrap();
+            let e = tracker.track(&frame);
+            assert_eq!(e.detected, detected, "{scales}: {e:?}");
+        }
+        for scales in [ScaleRange::new(0.3, 1.0), ScaleRange::new(1.2, 1.1)] {
+            let refused = RigidTracker::new(template.clone(), 20.0).with_scales(scales);
+            assert!(
+                matches!(refused, Err(RigidError::ScaleRange(s)) if s == scales),
+                "{scales}"
+            );
+        }
     }
 
     fn clicks(apex: [f64; 2]) -> Vec<(String, Vec<[f64; 2]>)> {

@@ -11,9 +11,10 @@
 //! gives the scale. The best placements, scored by their summed votes, go on to the
 //! fit and the verification.
 
-use super::{Pose, RigidTemplate};
+use super::{Bounds, Pose, RigidTemplate};
 use crate::vision::geometry::{clip_to_rect, truncate_index, Line};
 use crate::vision::pyramid::Pyramid;
+use crate::vision::ScaleRange;
 
 /// Width of a rotation bin, radians.
 const PSI_STEP: f64 = std::f64::consts::PI / 180.0;
@@ -42,8 +43,6 @@ const SAME_APEX_PX: f64 = 4.0;
 /// An edge gives the scale when it lies at least this far from the apex, reference
 /// pixels.
 const MIN_SCALE_OFFSET_PX: f64 = 2.0;
-/// The scales searched, frame pixels per reference pixel.
-pub const SCALES: (f64, f64) = (0.5, 2.0);
 
 /// A placement and its votes.
 #[derive(Debug, Clone, Copy)]
@@ -78,9 +77,10 @@ impl Search {
         &mut self,
         pyr: &Pyramid,
         template: &RigidTemplate,
-        window_rad: f64,
+        bounds: &Bounds,
         out: &mut Vec<Pose>,
     ) {
+        let window_rad = bounds.window_rad;
         out.clear();
         let (all_voting, edges) = voting_edges(template);
         let voting = &all_voting[..edges];
@@ -164,7 +164,7 @@ impl Search {
                 s[r] = a[r - 1] + 2.0 * a[r] + a[r + 1];
             }
         }
-        self.score(pyr, template, voting);
+        self.score(pyr, template, voting, bounds.scales);
         for s in &self.scored {
             if out.len() == MAX_PLACEMENTS {
                 break;
@@ -180,8 +180,15 @@ impl Search {
         }
     }
 
-    /// Scores every pairing of the apex edges' lines per rotation bin.
-    fn score(&mut self, pyr: &Pyramid, template: &RigidTemplate, voting: &[usize]) {
+    /// Scores every pairing of the apex edges' lines per rotation bin, the scale edge
+    /// looked for at the distances `scales` allow.
+    fn score(
+        &mut self,
+        pyr: &Pyramid,
+        template: &RigidTemplate,
+        voting: &[usize],
+        scales: ScaleRange,
+    ) {
         self.scored.clear();
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         let row = |k: usize, i: usize| (k * n_psi + i) * n_rho;
@@ -236,8 +243,8 @@ impl Search {
                             let (c, s) = self.trig[2 * n_psi + i];
                             let at_apex =
                                 f64::from(c) * apex[0] + f64::from(s) * apex[1] - self.rho_min;
-                            let r0 = at_apex + SCALES.0 * offset;
-                            let r1 = at_apex + SCALES.1 * offset;
+                            let r0 = at_apex + scales.lo * offset;
+                            let r1 = at_apex + scales.hi * offset;
                             let (lo, hi) =
                                 (r0.min(r1).max(0.0), r0.max(r1).min((n_rho - 1) as f64));
                             let cells = &self.smooth[row(2, i)..row(2, i) + n_rho];
