@@ -10,9 +10,9 @@
 //!
 //! Verification then asks of the last pass's stations what `super` promises: every
 //! edge in view holds its calibrated step at [`HELD_SHARE`] of its stations (all but
-//! one of three) and at the apex, its median station holds it, no edge runs on past
-//! an end where the reference shows it ending, and the apex, rotation and scale lie in
-//! range.
+//! one of three) and at the apex, its median station holds it, the probe's sides of
+//! the edges are one body ([`ONE_BODY_SHARE`]), no edge runs on past an end where the
+//! reference shows it ending, and the apex, rotation and scale lie in range.
 
 use image::GrayImage;
 use nalgebra::{Matrix4, Vector4};
@@ -50,6 +50,9 @@ const FIT_SHARE: f64 = 0.2;
 /// this distance of the fitted line.
 const HOLD_SHARE: f64 = 0.2;
 const HELD_PX: f64 = 1.5;
+/// The levels on the probe's side of its edges in view lie within this share of the
+/// smallest calibrated step: one body.
+const ONE_BODY_SHARE: f64 = 0.5;
 /// A station past a closed end shows the edge running on when it steps by this share
 /// of the calibrated step within [`HELD_PX`] of the line.
 const RUN_ON_SHARE: f64 = 0.7;
@@ -107,6 +110,8 @@ struct Point {
     /// The located step's point, frame pixels.
     at: [f64; 2],
     step: f64,
+    /// Mean level on the probe's side of the located step.
+    inside: f64,
     /// The step was found (inside the frame); else the station is out of view.
     in_view: bool,
 }
@@ -127,6 +132,7 @@ impl Point {
             tau,
             at: add(q, scale(normal, f.t)),
             step: f.step / step,
+            inside: f.inside,
             in_view: true,
         }
     }
@@ -155,6 +161,39 @@ impl Against {
             depth,
         }
     }
+}
+
+/// The edge whose probe side is not the body the others' are, if one is: the levels
+/// on the probe's side of the edges in view (`inside`, NaN for an edge not in view)
+/// spread by more than [`ONE_BODY_SHARE`] of the smallest calibrated step. Named: the
+/// edge farthest from their median.
+fn not_one_body(t: &RigidTemplate, inside: &[f64; MAX_EDGES]) -> Option<usize> {
+    let mut seen = [0.0; MAX_EDGES];
+    let mut n = 0;
+    let mut yardstick = f64::INFINITY;
+    for (e, &level) in inside.iter().enumerate().take(t.edges.len()) {
+        if level.is_finite() {
+            seen[n] = level;
+            n += 1;
+            yardstick = yardstick.min(t.edges[e].step);
+        }
+    }
+    if n < 2 {
+        return None;
+    }
+    let seen = &mut seen[..n];
+    seen.sort_by(f64::total_cmp);
+    if seen[n - 1] - seen[0] <= ONE_BODY_SHARE * yardstick {
+        return None;
+    }
+    let median = seen[n / 2];
+    (0..t.edges.len())
+        .filter(|&e| inside[e].is_finite())
+        .max_by(|&a, &b| {
+            (inside[a] - median)
+                .abs()
+                .total_cmp(&(inside[b] - median).abs())
+        })
 }
 
 /// Fits poses; keeps its buffers between calls.
@@ -246,6 +285,7 @@ impl Fitter {
                         tau,
                         at: q,
                         step: 0.0,
+                        inside: f64::NAN,
                         in_view: false,
                     },
                 });
@@ -367,6 +407,10 @@ impl Fitter {
         let mut confidence: f64 = 1.0;
         let mut refusal: Option<Miss> = None;
         let mut steps = [0.0; MAX_STATIONS];
+        let mut levels = [0.0; MAX_STATIONS];
+        // Per edge in view, the median level on the probe's side of its holding
+        // stations.
+        let mut inside = [f64::NAN; MAX_EDGES];
         for (e, edge) in t.edges.iter().enumerate() {
             let points = || self.points.iter().filter(move |p| p.edge == e);
             let total = points().count();
@@ -376,6 +420,9 @@ impl Fitter {
             for p in points().filter(|p| p.in_view) {
                 if in_view < MAX_STATIONS {
                     steps[in_view] = p.step;
+                }
+                if held < MAX_STATIONS && Self::holds_final(t, &pose, p) {
+                    levels[held] = p.inside;
                 }
                 if in_view == 0 {
                     span[0] = p.tau;
@@ -395,6 +442,11 @@ impl Fitter {
             let n = in_view.min(MAX_STATIONS);
             steps[..n].sort_by(f64::total_cmp);
             let median_ratio = steps[n / 2];
+            let m = held.min(MAX_STATIONS);
+            if m > 0 {
+                levels[..m].sort_by(f64::total_cmp);
+                inside[e] = levels[m / 2];
+            }
             confidence = confidence.min(share);
             edges[e] = Some(Seen {
                 span,
@@ -424,7 +476,9 @@ impl Fitter {
             }
         }
         let refusal = refusal.or_else(|| {
-            if !apex_in {
+            if let Some(e) = not_one_body(t, &inside) {
+                Some(Miss::WrongAppearance(t.edges[e].name))
+            } else if !apex_in {
                 Some(Miss::ApexOutside)
             } else if pose.psi.abs() > window_rad + 2.0 * sigma {
                 Some(Miss::RotationOutside)

@@ -10,8 +10,9 @@
 //!   along every edge in view (`station`), rotation, apex and scale at once, with
 //!   robust weights; the rotation's standard error comes from the fit's residuals;
 //! - `verify`: the frame shows this probe only when every edge the pose puts in view
-//!   steps as calibrated (polarity, size) along its length and at the apex, no closed
-//!   edge runs on past its end, and the apex, rotation and scale are in range. Each
+//!   steps as calibrated (polarity, size) along its length and at the apex, the
+//!   probe's sides of its edges are one body, no closed edge runs on past its end, and
+//!   the apex, rotation and scale are in range. Each
 //!   refusal names its reason.
 
 mod calibrate;
@@ -458,6 +459,30 @@ mod tests {
         }
         let e = tracker.track(&frame);
         assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
+    }
+
+    /// A needle whose half below its axis is 80 levels darker than its upper half
+    /// (against a calibrated step of 120): each flank still steps as the needle's, but
+    /// the two are not one body, and the frame is refused as `wrong-appearance`.
+    #[test]
+    fn flanks_of_two_bodies_are_not_one_probe() {
+        let apex = [250.0, 100.0];
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let mut frame = needle(0.0, apex, 2.0, 2);
+        assert!(tracker.track(&frame).detected);
+        for (x, y, p) in frame.enumerate_pixels_mut() {
+            let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+            if p[0] > 120 && dy > 6.0 - 0.0225 * dx {
+                p[0] -= 80;
+            }
+        }
+        let e = tracker.track(&frame);
+        assert!(
+            !e.detected && matches!(e.miss, Some(Miss::WrongAppearance(_))),
+            "{e:?}"
+        );
     }
 
     /// A needle at the reference's size is detected over the widest scales and over
