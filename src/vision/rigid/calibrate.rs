@@ -27,6 +27,11 @@ const TRACE_SHARE: f64 = 0.5;
 const TRACE_REACH_PX: f64 = 1.5;
 /// A traced edge's direction is taken over this many of its last found stations.
 const STEER_STATIONS: usize = 10;
+/// How far a traced point may depart from the line through the clicked stretch, per
+/// pixel traced beyond it, on top of [`TRACE_REACH_PX`]: a real needle's flank bows by
+/// a pixel or two over its length (a slope of a few hundredths at its ends), while a
+/// background line the trace could steer onto departs faster.
+const TRACE_DRIFT: f64 = 0.02;
 /// Missed stations in a row that end a traced edge.
 const TRACE_GAP: usize = 3;
 /// Shortest edge whose bow is fitted, pixels.
@@ -344,7 +349,8 @@ fn find_edge(
         // Steered: each station continues from the last found point along the
         // direction of the points found over the last stretch, so a gently curved edge
         // (a real needle's flank) is followed to its end.
-        let mut last = line.foot(at(start));
+        let first = line.foot(at(start));
+        let mut last = first;
         let mut direction = scale(along(line.normal), sign);
         let mut found: Vec<[f64; 2]> = vec![last];
         let mut gap = 0;
@@ -356,7 +362,12 @@ fn find_edge(
                     open[end] = true;
                     break;
                 }
-                Some(s) if s.step >= TRACE_SHARE * step && s.t.abs() <= TRACE_REACH_PX => {
+                Some(s)
+                    if s.step >= TRACE_SHARE * step
+                        && s.t.abs() <= TRACE_REACH_PX
+                        && line.depth(add(q, scale(n, s.t))).abs()
+                            <= TRACE_REACH_PX + TRACE_DRIFT * norm(sub(q, first)) =>
+                {
                     last = add(q, scale(n, s.t));
                     found.push(last);
                     points.push(last);

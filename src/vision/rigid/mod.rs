@@ -395,6 +395,37 @@ mod tests {
         })
     }
 
+    /// A reference whose lower flank forks 20 px beyond its clicks: a body at the
+    /// probe's level below it, bounded by a line turned 10 deg from the flank, carries
+    /// the step away from the flank for 75 px. The trace keeps to the flank, whose
+    /// direction is calibrated to 0.12 deg; steered on to the other line it was 2.0 deg
+    /// off.
+    #[test]
+    fn a_trace_does_not_steer_on_to_a_line_forking_off_the_edge() {
+        let apex = [250.0, 100.0];
+        let mut reference = needle(0.0, apex, 2.0, 1);
+        let turn = 10f64.to_radians().tan();
+        for (x, y, p) in reference.enumerate_pixels_mut() {
+            let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+            let lower = 12.0 - 0.12 * dx;
+            let fork = -175.0;
+            if dx < fork && dy >= lower && dy < lower + turn * (fork - dx) {
+                p[0] = 180;
+            }
+        }
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let lower = &template.edges[1];
+        // The flank's inward normal points up and right of its direction (-400, 48).
+        let truth = 48f64.atan2(400.0);
+        let angle = (-lower.normal[0]).atan2(-lower.normal[1]);
+        assert!(
+            (angle - truth).abs().to_degrees() < 0.15,
+            "{} against {}",
+            angle.to_degrees(),
+            truth.to_degrees()
+        );
+    }
+
     /// A reference whose lower flank's step carries on past the blunt end: a band of
     /// background (150, between the probe's 180 and the 60 around it) beyond the end
     /// face, above the lower flank's line.
