@@ -44,9 +44,8 @@ reference, CCW on screen), force_nN (signed as the angle), tip_x, tip_y (the ape
 x right, y down) - empty when not detected - then confidence, angle_sigma_deg (the angle's \
 standard error from the frame's noise and the calibration's; on rendered frames the errors \
 run 1.07-1.14 times it on every look), scale (frame pixels per \
-reference pixel; the estimate's least certain number: where a frame shows too little of the \
-probe to fix its size, a fifth of the AFM pyramid's detections on rendered frames, it reads \
-more than 15 % off, mostly low; the angle, apex and force do not use it), force_saturated, red/blue/green_support (edge pixels), px_per_um, \
+reference pixel, where the frame measures it: for the AFM pyramid the beam edge's distance \
+from the apex; empty where only the faces are fitted, which leave it free), force_saturated, red/blue/green_support (edge pixels), px_per_um, \
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \

@@ -571,7 +571,7 @@ impl PyramidTracker {
 
     /// Why a refined tip is not this probe's, if it is not: the apex outside the
     /// frame, the rotation outside the window (beyond its standard error), the scale
-    /// outside `tracker.scale_range`, or an edge
+    /// (where the beam edge measures it) outside `tracker.scale_range`, or an edge
     /// in view that the frame does not show as calibrated ([`stations::check_edges`]).
     fn refusal(
         &self,
@@ -590,7 +590,8 @@ impl PyramidTracker {
         if beyond > WINDOW_SIGMAS * fit.turn_sigma + WINDOW_SLACK_RAD {
             return Some(Miss::RotationOutside);
         }
-        if self.scale_range.is_some_and(|r| !r.contains(pose.scale)) {
+        let scale_measured = fitted_edges(bands, fit)[RED];
+        if scale_measured && self.scale_range.is_some_and(|r| !r.contains(pose.scale)) {
             return Some(Miss::ScaleMismatch);
         }
         let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
@@ -660,7 +661,9 @@ impl PyramidTracker {
             apex_px: Some(apex),
             edges,
             angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_sigma)),
-            scale: Some(pose.scale),
+            // Measured only by the beam edge's distance from the apex; the faces alone
+            // leave it free over a range.
+            scale: fitted_edges(bands, fit)[RED].then_some(pose.scale),
             confidence,
             miss: None,
         }
