@@ -37,6 +37,8 @@ struct Measured {
     false_detections: usize,
     errors: Vec<f64>,
     apex_errors: Vec<f64>,
+    /// |reported scale / true scale - 1|, or infinity for a detection reporting none.
+    scale_errors: Vec<f64>,
     ratios: Vec<f64>,
     misses: Vec<String>,
     /// Misses that the fit from the true pose refuses too: the verification's, not
@@ -149,6 +151,11 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
             continue;
         }
         out.detected += 1;
+        let true_scale = spec.magnification / session.reference.magnification;
+        out.scale_errors.push(
+            e.scale
+                .map_or(f64::INFINITY, |s| (s / true_scale - 1.0).abs()),
+        );
         let err = e.angle_deg.unwrap() - truth.angle_deg;
         out.errors.push(err.abs());
         out.ratios.push(err.abs() / e.angle_sigma_deg.unwrap());
@@ -220,6 +227,13 @@ fn measure(kind: ToolKind) -> Measured {
         m.ratios.iter().filter(|r| **r > 4.0).count()
     );
     println!(
+        "{}: scale error median {:.4}, p99 {:.4}, max {:.4}",
+        kind.name(),
+        quantile(&m.scale_errors, 0.5),
+        quantile(&m.scale_errors, 0.99),
+        quantile(&m.scale_errors, 1.0)
+    );
+    println!(
         "{}: {} missed, {} of them refused from the true pose too",
         kind.name(),
         m.misses.len(),
@@ -265,6 +279,14 @@ fn check(kind: ToolKind) {
         kind.name()
     );
     assert!(p95 <= 0.10, "{}: angle p95 {p95:.4} deg", kind.name());
+    // The scale is measured by the edges away from the apex: 0.04-0.13 % off in the
+    // median, 2.9 % at worst over seeds 41, 97 and 7.
+    let scale_max = quantile(&m.scale_errors, 1.0);
+    assert!(
+        scale_max <= 0.04,
+        "{}: a scale {scale_max:.4} off",
+        kind.name()
+    );
     let ratio = quantile(&m.ratios, 0.5);
     assert!(
         (0.5..=0.9).contains(&ratio),
