@@ -219,6 +219,10 @@ pub enum Miss {
     /// face running short or on, or the beam's lower face not at its calibrated
     /// thickness.
     ScaleMismatch,
+    /// A rigid probe of named edges shows only the two edges meeting at its tip point,
+    /// which any corner of their angle matches: no edge away from the apex is in view
+    /// to measure its size.
+    ScaleUnseen,
     /// A tip-like hypothesis passed every check above but its combined confidence is
     /// too low.
     LowConfidence,
@@ -241,6 +245,7 @@ impl Miss {
             Miss::EdgeMissing(edge) => edge.missing,
             Miss::WrongAppearance(edge) => edge.appearance,
             Miss::ScaleMismatch => "scale-mismatch",
+            Miss::ScaleUnseen => "scale-unseen",
             Miss::LowConfidence => "low-confidence",
             Miss::OtherProbe => "other-probe",
             Miss::ScaleUnlikeOthers => "scale-unlike-other-probes",

@@ -475,8 +475,15 @@ impl Fitter {
                 refusal = Some(Miss::ScaleMismatch);
             }
         }
+        // An edge away from the apex measures the probe's size; the two apex edges
+        // alone are any corner of their angle.
+        let away = |e: &usize| !t.apex_edges.contains(e);
+        let size_unseen = (0..t.edges.len()).any(|e| away(&e))
+            && !(0..t.edges.len()).any(|e| away(&e) && edges[e].is_some());
         let refusal = refusal.or_else(|| {
-            if let Some(e) = not_one_body(t, &inside) {
+            if size_unseen {
+                Some(Miss::ScaleUnseen)
+            } else if let Some(e) = not_one_body(t, &inside) {
                 Some(Miss::WrongAppearance(t.edges[e].name))
             } else if !apex_in {
                 Some(Miss::ApexOutside)
@@ -533,5 +540,82 @@ impl Fitter {
                 .count()
         };
         (0..2).any(|end| !edge.open[end] && past(end) == BEYOND_PX.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::{EdgeName, RigidEdge};
+
+    /// A blunt needle's template: the upper flank and the end face meet at the apex
+    /// (the origin); the lower flank lies 12 px below, away from it.
+    fn template() -> RigidTemplate {
+        let edge = |name: &str, normal: [f64; 2], offset: f64, extent: [f64; 2]| RigidEdge {
+            name: EdgeName::intern(name),
+            normal,
+            offset,
+            extent,
+            open: [true, false],
+            bow: 0.0,
+            bow_ends: extent,
+            polarity: 1.0,
+            step: 100.0,
+        };
+        RigidTemplate {
+            edges: vec![
+                edge("upper", [0.0, 1.0], 0.0, [-200.0, 0.0]),
+                edge("end", [-1.0, 0.0], 0.0, [0.0, 12.0]),
+                edge("lower", [0.0, -1.0], -12.0, [-200.0, 0.0]),
+            ],
+            apex: [0.0, 0.0],
+            apex_edges: [0, 1],
+            angle_sigma_rad: 1e-4,
+        }
+    }
+
+    /// Stations along every edge, each holding its step where the pose puts it, the
+    /// lower flank's in view or not.
+    fn fitter(t: &RigidTemplate, pose: &Pose, lower_in_view: bool) -> Fitter {
+        let mut f = Fitter::default();
+        for (e, edge) in t.edges.iter().enumerate() {
+            for k in 0..=8 {
+                let tau = edge.extent[0] + edge.length() * f64::from(k) / 8.0;
+                let in_view = e != 2 || lower_in_view;
+                f.points.push(Point {
+                    edge: e,
+                    tau,
+                    at: pose.place(edge, tau),
+                    step: if in_view { 1.0 } else { 0.0 },
+                    inside: 180.0,
+                    in_view,
+                });
+            }
+        }
+        f
+    }
+
+    /// The two edges meeting at the apex, holding everywhere, are any corner of their
+    /// angle: without an edge away from the apex in view the pose is refused as
+    /// `scale-unseen`; with the lower flank in view it is verified.
+    #[test]
+    fn a_corner_alone_does_not_show_the_probe() {
+        let t = template();
+        let pose = Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: [250.0, 100.0],
+        };
+        let frame = GrayImage::new(320, 240);
+        let mut seen = fitter(&t, &pose, true);
+        assert!(seen.verify(&frame, &t, pose, 1e-4, 0.3).is_ok());
+        let mut corner = fitter(&t, &pose, false);
+        assert_eq!(
+            corner
+                .verify(&frame, &t, pose, 1e-4, 0.3)
+                .err()
+                .map(|r| r.0),
+            Some(Miss::ScaleUnseen)
+        );
     }
 }

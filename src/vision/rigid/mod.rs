@@ -11,8 +11,9 @@
 //!   robust weights; the rotation's standard error comes from the fit's residuals;
 //! - `verify`: the frame shows this probe only when every edge the pose puts in view
 //!   steps as calibrated (polarity, size) along its length and at the apex, the
-//!   probe's sides of its edges are one body, no closed edge runs on past its end, and
-//!   the apex, rotation and scale are in range. Each
+//!   probe's sides of its edges are one body, an edge away from the apex is in view
+//!   (it measures the size), no closed edge runs on past its end, and the apex,
+//!   rotation and scale are in range. Each
 //!   refusal names its reason.
 
 mod calibrate;
