@@ -358,7 +358,7 @@ fn replay_tracks_a_needle_named_in_its_config_and_reports_no_force() {
     for (name, clicks) in &session.clicks {
         toml.push_str(&format!("{name} = {}\n", points(clicks)));
     }
-    std::fs::write(dir.path().join("probe.toml"), toml).unwrap();
+    std::fs::write(dir.path().join("probe.toml"), &toml).unwrap();
     let csv = dir.path().join("out.csv");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
         .arg("replay")
@@ -398,4 +398,21 @@ fn replay_tracks_a_needle_named_in_its_config_and_reports_no_force() {
             truth.angle_deg
         );
     }
+    // A scale range beyond the rigid search's is refused before any frame, by name.
+    let wide = toml.replacen("[tracker]\n", "[tracker]\nscale_range = [0.3, 1.0]\n", 1);
+    std::fs::write(dir.path().join("wide.toml"), wide).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
+        .arg("replay")
+        .arg(&frames_dir)
+        .arg("--config")
+        .arg(dir.path().join("wide.toml"))
+        .arg("--csv")
+        .arg(dir.path().join("wide.csv"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("tracker.scale_range = [0.3, 1]"),
+        "{stderr}"
+    );
 }
