@@ -11,7 +11,7 @@
 use image::GrayImage;
 
 use super::fit::{stations_along, MAX_STATIONS};
-use super::station::Stations;
+use super::station::{Stations, RUN};
 use super::{RigidEdge, RigidError, RigidTemplate, MAX_EDGES};
 use crate::vision::geometry::{add, along, dot, norm, principal_axis, scale, sub, unit, Line};
 use crate::vision::EdgeName;
@@ -398,7 +398,9 @@ fn find_edge(
         step,
         bow: shape.bow,
         bow_ends: shape.ends,
-        angle_sigma: sigma / shape.spread.max(1.0),
+        // Points SPACING_PX apart each average a run of RUN pixels along the edge, so
+        // neighbours share their noise: about RUN / SPACING_PX of them count as one.
+        angle_sigma: sigma / shape.spread.max(1.0) * (RUN as f64 / SPACING_PX).max(1.0).sqrt(),
     })
 }
 

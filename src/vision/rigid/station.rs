@@ -16,7 +16,7 @@ use image::GrayImage;
 use crate::vision::geometry::{add, along, bilinear, scale};
 
 /// Samples averaged along the edge per profile point, one pixel apart.
-const RUN: usize = 7;
+pub(super) const RUN: usize = 7;
 /// Profile spacing across the edge, pixels.
 const DT: f64 = 0.5;
 /// The derivative spans this many samples either side (one pixel).
