@@ -359,16 +359,19 @@ fn replay_tracks_a_needle_named_in_its_config_and_reports_no_force() {
         toml.push_str(&format!("{name} = {}\n", points(clicks)));
     }
     std::fs::write(dir.path().join("probe.toml"), &toml).unwrap();
+    let replay = |config: &str, csv: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
+            .arg("replay")
+            .arg(&frames_dir)
+            .arg("--config")
+            .arg(dir.path().join(config))
+            .arg("--csv")
+            .arg(csv)
+            .output()
+            .unwrap()
+    };
     let csv = dir.path().join("out.csv");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
-        .arg("replay")
-        .arg(&frames_dir)
-        .arg("--config")
-        .arg(dir.path().join("probe.toml"))
-        .arg("--csv")
-        .arg(&csv)
-        .output()
-        .unwrap();
+    let out = replay("probe.toml", &csv);
     assert!(
         out.status.success(),
         "{}",
@@ -401,15 +404,7 @@ fn replay_tracks_a_needle_named_in_its_config_and_reports_no_force() {
     // A scale range beyond the rigid search's is refused before any frame, by name.
     let wide = toml.replacen("[tracker]\n", "[tracker]\nscale_range = [0.3, 1.0]\n", 1);
     std::fs::write(dir.path().join("wide.toml"), wide).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
-        .arg("replay")
-        .arg(&frames_dir)
-        .arg("--config")
-        .arg(dir.path().join("wide.toml"))
-        .arg("--csv")
-        .arg(dir.path().join("wide.csv"))
-        .output()
-        .unwrap();
+    let out = replay("wide.toml", &dir.path().join("wide.csv"));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && stderr.contains("tracker.scale_range = [0.3, 1]"),
