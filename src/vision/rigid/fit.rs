@@ -421,15 +421,17 @@ impl Fitter {
                 if in_view < MAX_STATIONS {
                     steps[in_view] = p.step;
                 }
-                if held < MAX_STATIONS && Self::holds_final(t, &pose, p) {
-                    levels[held] = p.inside;
-                }
                 if in_view == 0 {
                     span[0] = p.tau;
                 }
                 span[1] = p.tau;
                 in_view += 1;
-                held += usize::from(Self::holds_final(t, &pose, p));
+                if Self::holds_final(t, &pose, p) {
+                    if held < MAX_STATIONS {
+                        levels[held] = p.inside;
+                    }
+                    held += 1;
+                }
             }
             let is_apex_edge = t.apex_edges.contains(&e);
             if in_view < MIN_IN_VIEW.min(total) || (in_view as f64) < IN_VIEW_SHARE * total as f64 {

@@ -13,8 +13,7 @@
 //!   steps as calibrated (polarity, size) along its length and at the apex, the
 //!   probe's sides of its edges are one body, an edge away from the apex is in view
 //!   (it measures the size), no closed edge runs on past its end, and the apex,
-//!   rotation and scale are in range. Each
-//!   refusal names its reason.
+//!   rotation and scale are in range. Each refusal names its reason.
 
 mod calibrate;
 mod fit;
