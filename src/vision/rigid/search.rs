@@ -344,10 +344,17 @@ fn wrap_pi_f32(a: f32) -> f32 {
     a
 }
 
-/// The edges that vote, and how many do: the two apex edges, then the one farthest
-/// from the apex (its distance gives the scale), if any is.
+/// The edges that vote, and how many do: the two apex edges, the longer first (where
+/// its support ends places the apex when the other is faint, and a short edge's run
+/// says little), then the one farthest from the apex (its distance gives the scale),
+/// if any is.
 fn voting_edges(template: &RigidTemplate) -> ([usize; 3], usize) {
     let [a, b] = template.apex_edges;
+    let [a, b] = if template.edges[b].length() > template.edges[a].length() {
+        [b, a]
+    } else {
+        [a, b]
+    };
     let far = (0..template.edges.len())
         .filter(|e| !template.apex_edges.contains(e))
         .max_by(|&a, &b| {
@@ -379,4 +386,46 @@ fn peaks(row: &[f32]) -> [Option<(usize, f32)>; LINES_PER_BIN] {
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::{EdgeName, RigidEdge};
+
+    /// A blunt needle's template, its apex edges named end face first.
+    fn end_face_first() -> RigidTemplate {
+        let edge = |name: &str, normal: [f64; 2], offset: f64, extent: [f64; 2]| RigidEdge {
+            name: EdgeName::intern(name),
+            normal,
+            offset,
+            extent,
+            open: [true, false],
+            bow: 0.0,
+            bow_ends: extent,
+            polarity: 1.0,
+            step: 100.0,
+        };
+        RigidTemplate {
+            edges: vec![
+                edge("end", [-1.0, 0.0], 0.0, [0.0, 12.0]),
+                edge("upper", [0.0, 1.0], 0.0, [-200.0, 0.0]),
+                edge("lower", [0.0, -1.0], -12.0, [-200.0, 0.0]),
+            ],
+            apex: [0.0, 0.0],
+            apex_edges: [0, 1],
+            angle_sigma_rad: 1e-4,
+        }
+    }
+
+    /// Where the first apex edge's support ends places the apex: the long flank's,
+    /// not the short end face's, whichever the configuration names first.
+    #[test]
+    fn the_longer_apex_edge_votes_first() {
+        let t = end_face_first();
+        assert_eq!(voting_edges(&t), ([1, 0, 2], 3));
+        let mut flank_first = t.clone();
+        flank_first.apex_edges = [1, 0];
+        assert_eq!(voting_edges(&flank_first), ([1, 0, 2], 3));
+    }
 }
