@@ -36,6 +36,11 @@ const TRACE_DRIFT: f64 = 0.02;
 const TRACE_GAP: usize = 3;
 /// Shortest edge whose bow is fitted, pixels.
 const MIN_BOW_LENGTH_PX: f64 = 60.0;
+/// Points this close to another edge's line (pixels) are left out of an edge's fit:
+/// half a station's run along the edge and the blur of the other's step.
+const CORNER_FIT_PX: f64 = (RUN / 2) as f64 + 2.0;
+/// Fewest points an edge is fitted through once those near corners are left out.
+const MIN_CLEAR_POINTS: usize = 4;
 /// A traced end within this distance past another edge's line ends at that corner.
 const CORNER_SLACK_PX: f64 = 4.0;
 /// Smallest step an edge may have on the reference, grey levels: below it the
@@ -129,6 +134,7 @@ pub fn calibrate(
             })
         })
         .collect::<Result<_, _>>()?;
+    let found = clear_of_corners(found);
     let (a, b) = (&found[apex_edges[0]], &found[apex_edges[1]]);
     let sin = (a.line.normal[0] * b.line.normal[1] - a.line.normal[1] * b.line.normal[0]).abs();
     if sin < MIN_APEX_ANGLE_DEG.to_radians().sin() {
@@ -387,21 +393,63 @@ fn find_edge(
             }
         }
     }
-    let line = fit_line(&points, line.normal);
-    let shape = Shape::fit(&points, &line);
-    let sigma = shape.sigma.max(0.05);
-    Ok(Found {
-        line: shape.chord,
+    let mut found = Found {
+        line,
         points,
         open,
         polarity,
         step,
-        bow: shape.bow,
-        bow_ends: shape.ends,
+        bow: 0.0,
+        bow_ends: [0.0; 2],
+        angle_sigma: 0.0,
+    };
+    let points = found.points.clone();
+    found.fit_through(&points);
+    Ok(found)
+}
+
+impl Found {
+    /// The edge's line, bow and direction's error fitted through `points`.
+    fn fit_through(&mut self, points: &[[f64; 2]]) {
+        let line = fit_line(points, self.line.normal);
+        let shape = Shape::fit(points, &line);
+        let sigma = shape.sigma.max(0.05);
+        self.line = shape.chord;
+        self.bow = shape.bow;
+        self.bow_ends = shape.ends;
         // Points SPACING_PX apart each average a run of RUN pixels along the edge, so
         // neighbours share their noise: about RUN / SPACING_PX of them count as one.
-        angle_sigma: sigma / shape.spread.max(1.0) * (RUN as f64 / SPACING_PX).max(1.0).sqrt(),
-    })
+        self.angle_sigma =
+            sigma / shape.spread.max(1.0) * (RUN as f64 / SPACING_PX).max(1.0).sqrt();
+    }
+}
+
+/// Each edge fitted again without its points within [`CORNER_FIT_PX`] of another
+/// edge's line: there a station's run reaches into the corner, where the other edge's
+/// blurred step moves the located one. Their extents keep every point.
+fn clear_of_corners(found: Vec<Found>) -> Vec<Found> {
+    let lines: Vec<Line> = found.iter().map(|f| f.line).collect();
+    found
+        .into_iter()
+        .enumerate()
+        .map(|(k, mut f)| {
+            let clear: Vec<[f64; 2]> = f
+                .points
+                .iter()
+                .copied()
+                .filter(|p| {
+                    lines
+                        .iter()
+                        .enumerate()
+                        .all(|(j, l)| j == k || l.depth(*p).abs() > CORNER_FIT_PX)
+                })
+                .collect();
+            if clear.len() >= MIN_CLEAR_POINTS && clear.len() < f.points.len() {
+                f.fit_through(&clear);
+            }
+            f
+        })
+        .collect()
 }
 
 /// An edge's shape: the chord between the ends of its found points, and its bow, the
