@@ -336,3 +336,57 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
         "{err}"
     );
 }
+
+#[test]
+fn a_rigid_probe_is_calibrated_from_one_pixel_near_its_tip_point() {
+    use nanoforce::scene::{render_tool_into, tool_suite, ToolKind};
+    let dir = tempfile::tempdir().unwrap();
+    let session = &tool_suite(ToolKind::ALL[0], 41, 1, 2, 0)[0];
+    let mut reference = image::GrayImage::new(1, 1);
+    let truth = render_tool_into(&session.reference, &[], &mut reference);
+    let image = dir.path().join("needle.png");
+    reference.save(&image).unwrap();
+    let overlay = dir.path().join("needle-check.png");
+    let calibrate = |extra: &[&str]| {
+        Command::new(BIN)
+            .arg("calibrate")
+            .arg("--image")
+            .arg(&image)
+            .args(["--overlay", overlay.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let near = format!(
+        "{:.0},{:.0}",
+        truth.apex_px[0] + 1.0,
+        truth.apex_px[1] - 1.0
+    );
+    let out = calibrate(&["--auto", "--rigid", "--apex", &near]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let block = String::from_utf8(out.stdout).unwrap();
+    assert!(block.contains("\napex = [\"e"), "{block}");
+    for name in ["e1", "e2", "e3"] {
+        assert!(block.contains(&format!("\n{name} = [[")), "{name}: {block}");
+    }
+    assert!(image::open(&overlay).is_ok(), "overlay written");
+    // The block is the probe's calibration: the reference reads zero.
+    let row = replay_reference(dir.path(), &block, &image);
+    assert_eq!(row[1], "1", "{row:?}");
+    let angle: f64 = row[2].parse().unwrap();
+    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    // A pixel in the background far from the needle finds no probe, and says so.
+    let out = calibrate(&["--auto", "--rigid", "--apex", "20,20"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("auto-calibration: "),
+        "{err}"
+    );
+    // --rigid without --auto is refused by the parser.
+    let out = calibrate(&["--rigid", "--apex", &near]);
+    assert!(!out.status.success());
+}

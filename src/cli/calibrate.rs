@@ -10,8 +10,8 @@ use clap::Args;
 use crate::config::{CalibrationConfig, PixelOrigin, Threshold, TrackerConfig, DEFAULT_WINDOW_DEG};
 use crate::session::frames::load_gray;
 use crate::vision::{
-    auto_calibrate, calibrate_rigid, draw_calibration, draw_rigid_calibration, Calibration, Edge,
-    RigidTemplate, NAMED_EDGE_COLOURS,
+    auto_calibrate, auto_calibrate_rigid, calibrate_rigid, draw_calibration,
+    draw_rigid_calibration, Calibration, Edge, RigidTemplate, NAMED_EDGE_COLOURS,
 };
 
 /// Refine clicked tip edges on a reference frame; print the calibration block.
@@ -37,14 +37,19 @@ Any other rigid probe (a tungsten needle, a tipless cantilever, a gripper jaw) i
 calibrated from two or more named straight edges, each given as --edge NAME=\"X,Y X,Y \
 ...\", and --apex-edges naming the two that meet at its tip point. The block then holds \
 apex and [tracker.calibration.edges]; the overlay draws each edge in the colour the \
-block names.",
+block names. With --auto --rigid --apex X,Y (a pixel on or near its tip point), \
+calibrate follows the probe's outline from there, edge after edge, until it leaves the \
+frame; the edges are named e1, e2, ... in their order around the outline, or by \
+--names in that order. It refuses an outline without an edge away from the tip point, \
+or whose edges do not verify as one probe on the reference.",
     after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
 --red 156.8,33.4 228.3,57.3 --blue 230.7,114.2 260.6,192.0 --green 282.5,199.8 314.8,142.9 \\\n      \
 --overlay calibration.png >> probe.toml\n  \
 nanoforce calibrate --image reference.png --auto --apex 270,214 >> probe.toml\n  \
 nanoforce calibrate --image needle.png --edge \"upper=120,210.5 260,236 400,261.5\" \\\n      \
 --edge \"lower=120,420 260,389.5 400,359\" --edge \"end=505,280 507.5,310 510,340\" \\\n      \
---apex-edges upper,end >> needle.toml"
+--apex-edges upper,end >> needle.toml\n  \
+nanoforce calibrate --image needle.png --auto --rigid --apex 505,280 >> needle.toml"
 )]
 pub struct CalibrateArgs {
     /// The reference frame (PNG, TIFF or PGM).
@@ -63,9 +68,14 @@ pub struct CalibrateArgs {
     /// it when the probe is the dominant body entering from a frame side.
     #[arg(long, conflicts_with_all = ["red", "blue", "green", "edges"])]
     pub auto: bool,
-    /// A pixel on or near the apex (blue meets green), as X,Y, for --auto.
+    /// A pixel on or near the apex (blue meets green; a rigid probe's tip point), as
+    /// X,Y, for --auto.
     #[arg(long, value_name = "X,Y", requires = "auto", value_parser = parse_point)]
     pub apex: Option<[f64; 2]>,
+    /// With --auto: a rigid probe of straight edges, found around its outline from
+    /// --apex.
+    #[arg(long, requires_all = ["auto", "apex"])]
+    pub rigid: bool,
     /// A rigid probe's named edge and two or more pixels on it, as "NAME=X,Y X,Y ..."
     /// (repeat for each edge, two or more; with --apex-edges).
     #[arg(long = "edge", value_name = "NAME=X,Y X,Y...", requires = "apex_edges",
@@ -177,6 +187,9 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<ExitCode> {
     if let Some(apex) = &args.apex_edges {
         return calibrate_named(&args, &reference, apex, &overlay_path);
     }
+    if args.rigid {
+        return auto_calibrate_named(&args, &reference, &overlay_path);
+    }
     let tracker = TrackerConfig {
         threshold: args.threshold,
         window_deg: args.window_deg,
@@ -240,6 +253,41 @@ fn calibrate_named(
     eprintln!(
         "overlay written to {}: check each named edge (in the colour the block names) and \
          the apex",
+        overlay_path.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A rigid probe's calibration from one pixel near its tip point (`--auto --rigid`):
+/// the block printed with the edges found as clicks, the overlay written.
+fn auto_calibrate_named(
+    args: &CalibrateArgs,
+    reference: &image::GrayImage,
+    overlay_path: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
+    let origin = args.pixel_origin;
+    let apex = args
+        .apex
+        .map(|p| origin.input(p))
+        .context("--auto --rigid needs --apex X,Y: a pixel on or near the tip point")?;
+    let (found, template) = auto_calibrate_rigid(reference, apex)
+        .with_context(|| format!("calibrating on {}", args.image.display()))?;
+    let clicks = CalibrationConfig {
+        reference_image: args.image.clone(),
+        edges: found
+            .edges
+            .into_iter()
+            .map(|(name, points)| (name, points.into_iter().map(|p| origin.output(p)).collect()))
+            .collect(),
+        apex: Some(found.apex),
+    };
+    print!("{}", named_block(&clicks, &template, origin));
+    draw_rigid_calibration(reference, &template)
+        .save(overlay_path)
+        .with_context(|| format!("writing {}", overlay_path.display()))?;
+    eprintln!(
+        "overlay written to {}: check that each edge found (in the colour the block names) \
+         lies on the probe and the apex on its tip point",
         overlay_path.display()
     );
     Ok(ExitCode::SUCCESS)

@@ -40,14 +40,14 @@ use super::options::{CalibrationConfig, TrackerConfig};
 use super::{Calibration, VisionError};
 
 /// Radius of the ring around the apex on which the pyramid's arc is found, pixels.
-const RING_PX: f64 = 10.0;
+pub(super) const RING_PX: f64 = 10.0;
 /// Angular samples on the ring.
 const RING_SAMPLES: usize = 720;
 /// Narrowest and widest pyramid arc, degrees.
 const ARC_DEG: (f64, f64) = (8.0, 150.0);
 /// A profile across an edge: its levels averaged between these depths (pixels) on
 /// each side, the crossing searched within the outer one.
-const LEVEL_PX: (f64, f64) = (1.5, 4.0);
+pub(super) const LEVEL_PX: (f64, f64) = (1.5, 4.0);
 /// The stretch of the rays from the apex (pixels) over which their steps are averaged
 /// when the ring does not show the pyramid, and how far either side of a ray its levels
 /// are taken.
@@ -61,7 +61,7 @@ const MIN_FACE_SHARE: f64 = 1.0 / 3.0;
 /// How far outside a face the ground's level is taken, pixels.
 const GROUND_PX: f64 = 4.0;
 /// Where the faces' tracing starts, pixels from the apex (the wedge is narrow nearer).
-const FACE_START_PX: f64 = 6.0;
+pub(super) const FACE_START_PX: f64 = 6.0;
 /// A profile counts while its step is at least this share of the edge's first steps;
 /// the tracing stops after [`MISSES`] profiles in a row that do not.
 const STEP_SHARE: f64 = 0.5;
@@ -142,7 +142,7 @@ enum Search {
 }
 
 /// The normal of direction `d` turned towards `towards` (relative to `d`'s origin).
-fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
+pub(super) fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
     let n = [-d[1], d[0]];
     if dot(n, towards) < 0.0 {
         scale(n, -1.0)
@@ -154,14 +154,23 @@ fn normal_towards(d: [f64; 2], towards: [f64; 2]) -> [f64; 2] {
 /// The pyramid's arc on the ring around `apex`: the two faces' directions (image
 /// angles, radians), the polarity (+1 bright probe) and the probe's and background's
 /// levels.
-struct Wedge {
-    ends: [f64; 2],
-    polarity: f64,
+pub(super) struct Wedge {
+    pub(super) ends: [f64; 2],
+    pub(super) polarity: f64,
     /// Where along each face (pixels from the apex) its step is strongest.
     strongest: [f64; 2],
 }
 
 fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
+    wedge_on(img, apex, RING_PX)
+}
+
+/// [`wedge`] on a ring of radius `ring_px`.
+pub(super) fn wedge_on(
+    img: &GrayImage,
+    apex: [f64; 2],
+    ring_px: f64,
+) -> Result<Wedge, AutoCalError> {
     let not_found = |reason: String| AutoCalError::NotFound {
         edges: "blue and green edges",
         reason,
@@ -172,10 +181,10 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
         let u = unit(k as f64 * step);
         let mut sum = 0.0;
         for dr in [-2.0, -1.0, 0.0, 1.0, 2.0] {
-            let v = bilinear(img, add(apex, scale(u, RING_PX + dr)));
+            let v = bilinear(img, add(apex, scale(u, ring_px + dr)));
             sum += v.ok_or_else(|| {
                 not_found(format!(
-                    "the apex ({:.1}, {:.1}) is within {RING_PX} px of the border",
+                    "the apex ({:.1}, {:.1}) is within {ring_px} px of the border",
                     apex[0], apex[1]
                 ))
             })?;
@@ -215,7 +224,7 @@ fn wedge(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
     }
     let Some((_, start, end, polarity)) = best else {
         return Err(not_found(format!(
-            "no arc of {}-{} deg stands out on a ring of {RING_PX} px around ({:.1}, {:.1}); \
+            "no arc of {}-{} deg stands out on a ring of {ring_px} px around ({:.1}, {:.1}); \
              levels {lo:.0}-{hi:.0}",
             ARC_DEG.0, ARC_DEG.1, apex[0], apex[1]
         )));
@@ -253,7 +262,7 @@ fn ray_steps(img: &GrayImage, apex: [f64; 2], angle: f64) -> Vec<Option<f64>> {
 /// mean over [`RAYS_PX`]), opening by [`ARC_DEG`], the probe's side of each where the
 /// other ray is and of one polarity: in image angles, the probe is brighter (or
 /// darker) counter-clockwise of the first and clockwise of the second.
-fn rays(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
+pub(super) fn rays(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalError> {
     let step = std::f64::consts::TAU / RING_SAMPLES as f64;
     let mean_step: Vec<f64> = (0..RING_SAMPLES)
         .map(|k| {
@@ -375,7 +384,7 @@ fn crossing(img: &GrayImage, centre: [f64; 2], n: [f64; 2], polarity: f64) -> Op
 
 /// Traces an edge from `origin` along `dir` (inside towards `inside`), from `start`
 /// pixels on: the crossings.
-fn trace(
+pub(super) fn trace(
     img: &GrayImage,
     origin: [f64; 2],
     dir: [f64; 2],
@@ -428,35 +437,35 @@ fn fit_line(pts: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2])> {
 /// A traced edge: a point, its direction (from the apex or the corner outward), and
 /// the traced span along it.
 #[derive(Debug, Clone, Copy)]
-struct Traced {
-    point: [f64; 2],
-    dir: [f64; 2],
-    span: (f64, f64),
+pub(super) struct Traced {
+    pub(super) point: [f64; 2],
+    pub(super) dir: [f64; 2],
+    pub(super) span: (f64, f64),
 }
 
 impl Traced {
-    fn at(&self, t: f64) -> [f64; 2] {
+    pub(super) fn at(&self, t: f64) -> [f64; 2] {
         add(self.point, scale(self.dir, t))
     }
 
-    fn length(&self) -> f64 {
+    pub(super) fn length(&self) -> f64 {
         self.span.1 - self.span.0
     }
 
     /// The traced line.
-    fn line(&self) -> Line {
+    pub(super) fn line(&self) -> Line {
         Line::through(self.point, [-self.dir[1], self.dir[0]])
     }
 
     /// Points at the given shares of the traced span.
-    fn clicks(&self, shares: &[f64]) -> Vec<[f64; 2]> {
+    pub(super) fn clicks(&self, shares: &[f64]) -> Vec<[f64; 2]> {
         let (a, b) = self.span;
         shares.iter().map(|f| self.at(a + f * (b - a))).collect()
     }
 }
 
 /// The line through traced points, directed like `dir`, with the points' span along it.
-fn traced(points: &[[f64; 2]], dir: [f64; 2]) -> Option<Traced> {
+pub(super) fn traced(points: &[[f64; 2]], dir: [f64; 2]) -> Option<Traced> {
     let mut points = points.to_vec();
     let (mut c, mut d) = fit_line(&points)?;
     for _ in 0..3 {

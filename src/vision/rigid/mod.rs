@@ -15,6 +15,7 @@
 //!   (it measures the size), no closed edge runs on past its end, and the apex,
 //!   rotation and scale are in range. Each refusal names its reason.
 
+mod autocal;
 mod calibrate;
 mod fit;
 mod search;
@@ -22,6 +23,7 @@ mod station;
 
 use image::GrayImage;
 
+pub use autocal::{auto_calibrate, RigidAutoClicks};
 pub use calibrate::calibrate;
 pub use fit::MAX_EDGES;
 

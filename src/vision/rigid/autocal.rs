@@ -1,0 +1,372 @@
+//! Automatic calibration of a rigid probe: its straight edges found from one click on
+//! or near its tip point, as clicked pixels on each that then go through the ordinary
+//! calibration ([`calibrate`]). The result is a template like any other: the same
+//! block printed, the same overlay for a person to confirm.
+//!
+//! 1. On a ring around the click the probe is the arc that stands out (as for the AFM
+//!    pyramid, `vision::autocal`): its two ends are the apex edges' directions, and
+//!    which side is brighter gives the probe's polarity.
+//! 2. Each edge is traced outward from the corner it starts at, with profiles across
+//!    it, until its step fades (another edge takes over at a corner) or it leaves the
+//!    frame; then traced again along the line through what it found, until that
+//!    stops growing.
+//! 3. An edge that ends inside the frame ends at a corner. On a ring around it the
+//!    body is an arc again: one end runs back along the edge, the other is near the
+//!    next edge's direction, which is taken where the step along a ray from the corner
+//!    is strongest (a ring small enough for a 10 px blunt end has its ends blurred by
+//!    the corner). So the outline is followed from the apex both ways, edge after edge,
+//!    until it leaves the frame (or closes, or reaches [`MAX_EDGES`]); an edge found
+//!    running on along the last one's line is that edge going on.
+//! 4. The edges are named `e1`, `e2`, ... in their order around the outline; each is
+//!    clicked at 10, 50 and 90 % of its traced stretch.
+//! 5. The template must verify on its own reference where calibration placed it; the
+//!    ring's outline is tried first, then the rays' (where the probe beside its tip
+//!    point is as bright as its ground, as for the pyramid).
+
+use image::GrayImage;
+
+use super::{calibrate, Pose, RigidTemplate, RigidTracker, MAX_EDGES};
+use crate::vision::autocal::{
+    rays, trace, traced, wedge_on, AutoCalError, Traced, Wedge, FACE_START_PX, LEVEL_PX, RING_PX,
+};
+use crate::vision::geometry::{add, bilinear, dot, norm, scale, sub, unit};
+use crate::vision::{VisionError, DEFAULT_WINDOW_DEG};
+
+/// Smallest ring around a corner, pixels: a short edge (a needle's blunt end) leaves
+/// less room before the next corner, and the ring is kept within half of it.
+const MIN_RING_PX: f64 = 4.0;
+/// An edge whose traced end lies within this distance of the frame's border (pixels,
+/// along its direction) leaves the frame there: the profiles across it need
+/// [`LEVEL_PX`] on either side.
+const BORDER_PX: f64 = LEVEL_PX.1 + 4.0;
+/// The traced end of an edge lies short of its corner by the profiles that missed it
+/// there; the ring is centred this far further on, pixels.
+const CORNER_AHEAD_PX: f64 = 2.0;
+/// Around a corner, the next edge's direction is looked for this far (degrees) either
+/// side of the ring's, in steps of [`TURN_STEP_DEG`], by its step along a ray over
+/// [`TURN_RAY_PX`] pixels from the corner, read [`TURN_SIDE_PX`] either side.
+const TURN_SEARCH_DEG: f64 = 45.0;
+const TURN_STEP_DEG: f64 = 0.5;
+const TURN_RAY_PX: (usize, usize) = (3, 30);
+const TURN_SIDE_PX: f64 = 1.5;
+/// Re-traces of an edge along the line found so far.
+const RETRACES: usize = 3;
+/// A next edge within this angle (degrees) of the last, starting within this distance
+/// (pixels) of the last's line, is the last going on: the probe's corners turn by
+/// tens of degrees.
+const SAME_DIRECTION: f64 = 5.0;
+const SAME_LINE_PX: f64 = 3.0;
+/// Where along each edge's traced stretch the clicks fall.
+const CLICK_SHARES: [f64; 3] = [0.1, 0.5, 0.9];
+
+/// The edges found: (name, clicked pixels) around the outline, and the two that meet
+/// at the tip point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigidAutoClicks {
+    pub edges: Vec<(String, Vec<[f64; 2]>)>,
+    pub apex: [String; 2],
+}
+
+/// Finds a rigid probe's edges from `apex` (a pixel on or near its tip point) and
+/// calibrates on them; they are named `e1`, `e2`, ... in their order around the
+/// outline.
+///
+/// The ring's outline is taken first, the rays' where the ring's does not make a
+/// template: one with an edge away from the apex, whose own reference verifies as
+/// this probe where calibration placed it (one body, every edge stepping as found).
+pub fn auto_calibrate(
+    reference: &GrayImage,
+    apex: [f64; 2],
+) -> Result<(RigidAutoClicks, RigidTemplate), AutoCalError> {
+    let ring = wedge_on(reference, apex, RING_PX)
+        .map_err(|e| not_found("the apex edges", e))
+        .and_then(|w| calibrated(reference, apex, &w));
+    ring.or_else(|first| {
+        rays(reference, apex)
+            .and_then(|w| calibrated(reference, apex, &w))
+            .map_err(|_| first)
+    })
+}
+
+/// The template of the outline that the apex edges `w` start, verified on its
+/// reference.
+fn calibrated(
+    reference: &GrayImage,
+    apex: [f64; 2],
+    w: &Wedge,
+) -> Result<(RigidAutoClicks, RigidTemplate), AutoCalError> {
+    let (edges, apex_at) = outline(reference, apex, w)?;
+    if edges.len() < 3 {
+        return Err(AutoCalError::NotFound {
+            edges: "an edge away from the tip point",
+            reason: "the outline from the apex edges leaves the frame or fades before \
+                     another edge; without one the template is any corner of the apex \
+                     edges' angle"
+                .into(),
+        });
+    }
+    let names: Vec<String> = (1..=edges.len()).map(|k| format!("e{k}")).collect();
+    let clicks = RigidAutoClicks {
+        edges: names
+            .iter()
+            .zip(&edges)
+            .map(|(n, t)| (n.clone(), t.clicks(&CLICK_SHARES)))
+            .collect(),
+        apex: apex_at.map(|k| names[k].clone()),
+    };
+    let template = calibrate(
+        reference,
+        &clicks.edges,
+        [clicks.apex[0].as_str(), clicks.apex[1].as_str()],
+    )
+    .map_err(VisionError::from)?;
+    let at_home = Pose {
+        psi: 0.0,
+        scale: 1.0,
+        apex: template.apex,
+    };
+    let check =
+        RigidTracker::new(template.clone(), DEFAULT_WINDOW_DEG).track_from(reference, at_home);
+    if let Some(miss) = check.miss {
+        return Err(AutoCalError::NotFound {
+            edges: "a probe",
+            reason: format!(
+                "the {} edges found around the outline do not verify as one probe on the \
+                 reference ({miss})",
+                edges.len()
+            ),
+        });
+    }
+    Ok((clicks, template))
+}
+
+/// The outline from the apex edges `w` gives: its edges in order, and the indices of
+/// the two apex edges among them.
+fn outline(
+    img: &GrayImage,
+    apex: [f64; 2],
+    w: &Wedge,
+) -> Result<(Vec<Traced>, [usize; 2]), AutoCalError> {
+    let dirs = w.ends.map(unit);
+    let axis = unit_of(add(dirs[0], dirs[1]));
+    let mut chains: [Vec<Traced>; 2] = [Vec::new(), Vec::new()];
+    for k in 0..2 {
+        let first =
+            follow(img, apex, dirs[k], sub(axis, dirs[k]), w.polarity).ok_or_else(|| {
+                AutoCalError::NotFound {
+                    edges: "an apex edge",
+                    reason: format!(
+                        "the step along the edge leaving ({:.1}, {:.1}) at {:.0} deg fades within \
+                     a few pixels",
+                        apex[0],
+                        apex[1],
+                        w.ends[k].to_degrees()
+                    ),
+                }
+            })?;
+        chains[k].push(first);
+    }
+    // Each chain followed on from its far end while the outline has room left.
+    let mut corners = vec![apex];
+    for k in 0..2 {
+        while chains[0].len() + chains[1].len() < MAX_EDGES {
+            let last = *chains[k].last().expect("a chain starts with its apex edge");
+            let Some(next) = next_edge(img, &last, w.polarity, &corners) else {
+                break;
+            };
+            corners.push(last.at(last.span.1));
+            match merged(&last, &next) {
+                // The edge goes on past a point where its trace stopped.
+                Some(longer) => *chains[k].last_mut().expect("not empty") = longer,
+                None => chains[k].push(next),
+            }
+        }
+    }
+    // Around the outline: the first chain from its far end to the apex, then the second.
+    let apex_at = [chains[0].len() - 1, chains[0].len()];
+    let [first, second] = chains;
+    Ok((first.into_iter().rev().chain(second).collect(), apex_at))
+}
+
+/// `next` as the continuation of `edge`, when it runs on along the same line: `edge`
+/// extended to its end.
+fn merged(edge: &Traced, next: &Traced) -> Option<Traced> {
+    let normal = [-edge.dir[1], edge.dir[0]];
+    let (start, end) = (next.at(next.span.0), next.at(next.span.1));
+    let on_line = dot(sub(start, edge.point), normal).abs() <= SAME_LINE_PX;
+    (dot(next.dir, edge.dir) >= SAME_DIRECTION.to_radians().cos() && on_line).then(|| Traced {
+        span: (edge.span.0, dot(sub(end, edge.point), edge.dir)),
+        ..*edge
+    })
+}
+
+/// An error of the ring search, for `edges`.
+fn not_found(edges: &'static str, e: AutoCalError) -> AutoCalError {
+    match e {
+        AutoCalError::NotFound { reason, .. } => AutoCalError::NotFound { edges, reason },
+        other => other,
+    }
+}
+
+fn unit_of(v: [f64; 2]) -> [f64; 2] {
+    scale(v, 1.0 / norm(v).max(1e-9))
+}
+
+/// The edge leaving `origin` along `dir` with the probe towards `inside`, traced, then
+/// traced again along the line found so far (from the origin's foot on it) while that
+/// finds more of it.
+fn follow(
+    img: &GrayImage,
+    origin: [f64; 2],
+    dir: [f64; 2],
+    inside: [f64; 2],
+    polarity: f64,
+) -> Option<Traced> {
+    let mut found = traced(
+        &trace(img, origin, dir, inside, polarity, FACE_START_PX),
+        dir,
+    )?;
+    for _ in 0..RETRACES {
+        let foot = found.at(dot(sub(origin, found.point), found.dir));
+        let pts = trace(img, foot, found.dir, inside, polarity, FACE_START_PX);
+        match traced(&pts, found.dir) {
+            Some(next) if next.length() > found.length() + 0.5 => found = next,
+            _ => break,
+        }
+    }
+    Some(found)
+}
+
+/// Whether `p` lies within [`BORDER_PX`] of the frame's border.
+fn near_border(img: &GrayImage, p: [f64; 2]) -> bool {
+    let (w, h) = (f64::from(img.width()) - 1.0, f64::from(img.height()) - 1.0);
+    p[0] < BORDER_PX || p[1] < BORDER_PX || p[0] > w - BORDER_PX || p[1] > h - BORDER_PX
+}
+
+/// The edge after `edge` around the outline, from the corner where it ends: none when
+/// it leaves the frame, when the corner is one already passed (the outline closes),
+/// or when no edge of the probe's polarity leaves it.
+fn next_edge(
+    img: &GrayImage,
+    edge: &Traced,
+    polarity: f64,
+    corners: &[[f64; 2]],
+) -> Option<Traced> {
+    let end = edge.at(edge.span.1);
+    if near_border(img, add(end, scale(edge.dir, BORDER_PX))) {
+        return None;
+    }
+    let corner = add(end, scale(edge.dir, CORNER_AHEAD_PX));
+    let ring = (0.5 * edge.length()).clamp(MIN_RING_PX, RING_PX);
+    if corners.iter().any(|c| norm(sub(*c, corner)) < 2.0 * ring) {
+        return None;
+    }
+    let w = wedge_on(img, corner, ring).ok()?;
+    if w.polarity != polarity {
+        return None;
+    }
+    // One end of the arc runs back along the edge; the other is near the next edge's.
+    // A small ring's ends are blurred by the corner: the direction is taken where the
+    // step along a ray from the corner is strongest, within [`TURN_SEARCH_DEG`] of it.
+    let back = scale(edge.dir, -1.0);
+    let ends = w.ends.map(unit);
+    let near = if dot(ends[0], back) >= dot(ends[1], back) {
+        w.ends[1]
+    } else {
+        w.ends[0]
+    };
+    let next = strongest_ray(img, corner, near, back, polarity)?;
+    follow(img, corner, next, back, polarity)
+}
+
+/// The direction from `corner`, within [`TURN_SEARCH_DEG`] of `near` (an image angle,
+/// radians), along which the frame steps most as an edge of `polarity` with the probe
+/// on the side of `body`; none where no ray shows such a step.
+fn strongest_ray(
+    img: &GrayImage,
+    corner: [f64; 2],
+    near: f64,
+    body: [f64; 2],
+    polarity: f64,
+) -> Option<[f64; 2]> {
+    let steps = (TURN_SEARCH_DEG / TURN_STEP_DEG) as i32;
+    let mut best: Option<(f64, [f64; 2])> = None;
+    for k in -steps..=steps {
+        let u = unit(near + f64::from(k) * TURN_STEP_DEG.to_radians());
+        let n = [-u[1], u[0]];
+        // The probe lies on the body's side of the ray.
+        let n = if dot(n, body) < 0.0 {
+            scale(n, -1.0)
+        } else {
+            n
+        };
+        let (mut sum, mut count) = (0.0, 0);
+        for r in TURN_RAY_PX.0..=TURN_RAY_PX.1 {
+            let p = add(corner, scale(u, r as f64));
+            let (Some(a), Some(b)) = (
+                bilinear(img, add(p, scale(n, TURN_SIDE_PX))),
+                bilinear(img, sub(p, scale(n, TURN_SIDE_PX))),
+            ) else {
+                continue;
+            };
+            sum += polarity * (a - b);
+            count += 1;
+        }
+        if 2 * count < TURN_RAY_PX.1 - TURN_RAY_PX.0 {
+            continue;
+        }
+        let mean = sum / count as f64;
+        if mean > 0.0 && best.is_none_or(|b| mean > b.0) {
+            best = Some((mean, u));
+        }
+    }
+    best.map(|b| b.1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bright needle (200 on 60) whose upper flank rises to the left from the apex
+    /// at (300, 200), with a blunt end face 40 px long down to the lower flank, which
+    /// falls to the left: a quadrilateral widening out of the frame on the left.
+    fn needle() -> GrayImage {
+        let upper = |x: f64| 200.0 - 0.10 * (300.0 - x);
+        let lower = |x: f64| 240.0 + 0.05 * (300.0 - x);
+        GrayImage::from_fn(400, 300, |x, y| {
+            let (x, y) = (f64::from(x), f64::from(y));
+            let inside = x <= 300.0 && y >= upper(x) && y <= lower(x);
+            image::Luma([if inside { 200 } else { 60 }])
+        })
+    }
+
+    #[test]
+    fn a_needle_is_followed_round_from_its_tip() {
+        let img = needle();
+        let (clicks, template) = auto_calibrate(&img, [301.0, 199.0]).unwrap();
+        let names: Vec<&str> = clicks.edges.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["e1", "e2", "e3"]);
+        assert_eq!(template.edges.len(), 3);
+        // The tip point is where the upper flank meets the end face.
+        assert!(
+            norm(sub(template.apex, [300.0, 200.0])) < 1.0,
+            "{:?}",
+            template.apex
+        );
+    }
+
+    /// A wedge whose two edges both leave the frame is any corner of its angle: no
+    /// template is made of it.
+    #[test]
+    fn a_corner_alone_is_refused() {
+        let img = GrayImage::from_fn(400, 300, |x, y| {
+            let (x, y) = (f64::from(x), f64::from(y));
+            let inside = x <= 300.0 && (y - 150.0).abs() <= 0.3 * (300.0 - x);
+            image::Luma([if inside { 200 } else { 60 }])
+        });
+        let err = auto_calibrate(&img, [300.0, 150.0])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("an edge away from the tip point"), "{err}");
+    }
+}
