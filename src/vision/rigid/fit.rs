@@ -76,10 +76,14 @@ const HUBER_K: f64 = 1.5;
 /// stations' runs overlap and the blur correlates them (measured on the rendered
 /// suites, tests/rigid_probes.rs).
 const SIGMA_FACTOR: f64 = 1.2;
-/// Apex stations: of the stations nearest the apex on each apex edge, the nearest and
-/// all but one must hold (a tip hidden under a particle holds none; noise can drop one
-/// behind the nearest).
+/// Apex stations: of the stations nearest the apex on each apex edge, all but one must
+/// hold (a tip hidden under a particle holds none; noise can drop one), and the nearest
+/// must step as the edge does within [`NEAREST_PX`] of it: its run reaches into the
+/// corner's blur, which moves the located step by up to 2 px on a faint edge, while a
+/// body that only looks like the probe (a dark segment of a rail for a dark lever's
+/// end) shows no step there.
 const APEX_STATIONS: usize = 3;
+const NEAREST_PX: f64 = 3.0;
 
 /// One edge as a fit saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -510,8 +514,8 @@ impl Fitter {
         p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
     }
 
-    /// The nearest and all but one of the [`APEX_STATIONS`] stations nearest the apex on
-    /// apex edge `e` hold it.
+    /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
+    /// hold it, and the nearest steps as it does within [`NEAREST_PX`].
     fn apex_held(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
         let edge = &t.edges[e];
         // Stations run from extent[0] to extent[1]; the apex end is the one nearer
@@ -521,13 +525,19 @@ impl Fitter {
         let count = stations.clone().count();
         let nearest = APEX_STATIONS.min(count);
         let mut held = [false; APEX_STATIONS];
+        let mut steps = false;
         let skip = if from_low { 0 } else { count - nearest };
         for (k, p) in stations.skip(skip).take(nearest).enumerate() {
             // Counted from the apex.
             let slot = if from_low { k } else { nearest - 1 - k };
             held[slot] = Self::holds_final(t, pose, p);
+            if slot == 0 {
+                steps = p.in_view
+                    && p.step >= HOLD_SHARE
+                    && Self::residual(t, pose, p).abs() <= NEAREST_PX;
+            }
         }
-        held[0] && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
+        steps && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
     }
 
     /// Every station past a closed end of edge `e` holds it.
