@@ -49,7 +49,7 @@ from the apex; empty where only the faces are fitted, which leave it free), forc
 magnification, tip_x_um, tip_y_um (from the SEM metadata of TIFF frames: FEI/Thermo tag \
 34682 or 34680, Zeiss tag 34118; empty without it, and unreadable metadata is a warning), \
 red_x0, red_y0, red_x1, red_y1 and the same for blue and green (the found edge segments, \
-pixels), miss (why not detected), frame_seq, utc and frame_time_s (a recorded frame's \
+pixels; a rigid probe's first three named edges), miss (why not detected), frame_seq, utc and frame_time_s (a recorded frame's \
 capture time), processing_ms (with --timing), seq, published_s and true_force_nN (empty: \
 only a live run's estimates.csv, which has these same columns, fills them) and felt \
 (1: a force the operator may feel, detected and not clamped). Without --timing the \

@@ -125,13 +125,11 @@ pub fn frame_path(frames_dir: &Path, name: &str) -> Option<PathBuf> {
 
 /// The estimate a replay CSV row describes, for drawing.
 fn estimate_of(row: &FrameRow) -> Estimate {
-    let fit = |e: Option<[[f64; 2]; 2]>| {
-        e.map(|[a, b]| EdgeFit {
-            start_px: a,
-            end_px: b,
-            support: 0,
-            contrast: 0.0,
-        })
+    let fit = |[a, b]: [[f64; 2]; 2]| EdgeFit {
+        start_px: a,
+        end_px: b,
+        support: 0,
+        contrast: 0.0,
     };
     Estimate {
         detected: row.detected,
@@ -139,7 +137,8 @@ fn estimate_of(row: &FrameRow) -> Estimate {
         force_nn: row.force_nn,
         force_saturated: false,
         apex_px: row.tip_px,
-        edges: row.edges.map(fit),
+        // The CSV holds the first three edges.
+        edges: std::array::from_fn(|k| row.edges.get(k).copied().flatten().map(fit)),
         angle_sigma_deg: None,
         scale: None,
         confidence: row.confidence.unwrap_or(0.0),

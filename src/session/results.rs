@@ -6,7 +6,7 @@
 //! at the model's limit, the edges' support, the SEM's scale from the frame's metadata
 //! (`px_per_um`, `magnification`, the apex in micrometres: empty without metadata), the
 //! found edge segments (`red_x0,red_y0,red_x1,red_y1`, ... in frame pixels, for
-//! pictures), `miss`, where the frame came from (`frame_seq`: a recorded frame's
+//! pictures; a rigid probe's first three named edges in those columns), `miss`, where the frame came from (`frame_seq`: a recorded frame's
 //! sequence number, a folder's frames count 1, 2, ... in file-name order; `utc` and
 //! `frame_time_s`: its capture time, ISO 8601 UTC and on the recording's clock, empty
 //! for a folder of frames), the tracker's time on it (`processing_ms`: every live run,
@@ -174,7 +174,7 @@ fn cell(value: Option<f64>, digits: usize) -> String {
 }
 
 /// The 12 edge columns: start and end of red, blue, green (empty when not found).
-fn edge_columns(edges: &[Option<EdgeFit>; 3]) -> String {
+fn edge_columns(edges: &[Option<EdgeFit>]) -> String {
     let mut cells = Vec::with_capacity(12);
     for e in Edge::ALL {
         match &edges[e.index()] {
@@ -445,11 +445,11 @@ mod tests {
             force_saturated: false,
             apex_px: Some([320.5, 240.25]),
             angle_sigma_deg: Some(0.0125),
-            edges: [
-                Some(fit([300.0, 200.0], [100.0, 150.0])),
-                None,
-                Some(fit([320.5, 240.25], [340.0, 210.0])),
-            ],
+            edges: std::array::from_fn(|k| match k {
+                0 => Some(fit([300.0, 200.0], [100.0, 150.0])),
+                2 => Some(fit([320.5, 240.25], [340.0, 210.0])),
+                _ => None,
+            }),
             scale: Some(1.0),
             confidence: 0.9,
             miss: None,

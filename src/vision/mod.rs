@@ -274,8 +274,10 @@ pub struct Estimate {
     /// Apex (blue meets green), frame pixels; predicted from the rigid tip when one of
     /// the two is out of view.
     pub apex_px: Option<[f64; 2]>,
-    /// Per edge, indexed by [`Edge::index`].
-    pub edges: [Option<EdgeFit>; 3],
+    /// Every edge of the probe in view, in its calibration's order: the AFM pyramid's
+    /// indexed by [`Edge::index`], a rigid probe's as its `[tracker.calibration.edges]`
+    /// names them.
+    pub edges: [Option<EdgeFit>; MAX_EDGES],
     /// Standard error of `angle_deg` from the frame's noise and the calibration's (each
     /// edge's orientation on the reference), degrees.
     pub angle_sigma_deg: Option<f64>,
@@ -334,7 +336,7 @@ impl Estimate {
             force_nn: None,
             force_saturated: false,
             apex_px: None,
-            edges: [None; 3],
+            edges: [None; MAX_EDGES],
             angle_sigma_deg: None,
             scale: None,
             confidence,

@@ -9,11 +9,11 @@ use imageproc::drawing::{draw_hollow_circle_mut, draw_line_segment_mut};
 use super::rigid::{RigidTemplate, MAX_EDGES};
 use super::{Calibration, Edge, Estimate};
 
-const COLOURS: [Rgb<u8>; 3] = [Rgb([255, 40, 40]), Rgb([60, 110, 255]), Rgb([40, 220, 60])];
 const APEX: Rgb<u8> = Rgb([255, 230, 0]);
 
-/// The colours a rigid probe's named edges are drawn in, in the calibration's order,
-/// with the words `nanoforce calibrate` names them by (the apex is marked in yellow).
+/// The colours a probe's edges are drawn in, in the calibration's order (the AFM
+/// pyramid's red, blue and green first), with the words `nanoforce calibrate` names
+/// them by (the apex is marked in yellow).
 pub const NAMED_EDGE_COLOURS: [(&str, Rgb<u8>); MAX_EDGES] = [
     ("red", Rgb([255, 40, 40])),
     ("blue", Rgb([60, 110, 255])),
@@ -40,10 +40,12 @@ pub fn draw_overlays(frame: &GrayImage, estimates: &[Estimate]) -> RgbImage {
     out
 }
 
+/// Each edge in its calibration's colour: the pyramid's red, blue and green, a rigid
+/// probe's as [`NAMED_EDGE_COLOURS`] names them.
 fn draw_estimate(out: &mut RgbImage, estimate: &Estimate) {
-    for e in Edge::ALL {
-        if let Some(fit) = &estimate.edges[e.index()] {
-            thick_segment(out, fit.start_px, fit.end_px, COLOURS[e.index()]);
+    for (fit, (_, colour)) in estimate.edges.iter().zip(NAMED_EDGE_COLOURS) {
+        if let Some(fit) = fit {
+            thick_segment(out, fit.start_px, fit.end_px, colour);
         }
     }
     if let Some(apex) = estimate.apex_px {
@@ -56,7 +58,7 @@ pub fn draw_calibration(reference: &GrayImage, calibration: &Calibration) -> Rgb
     let mut out = to_rgb(reference);
     for e in Edge::ALL {
         let seg = calibration.edge(e).segment_px;
-        thick_segment(&mut out, seg[0], seg[1], COLOURS[e.index()]);
+        thick_segment(&mut out, seg[0], seg[1], NAMED_EDGE_COLOURS[e.index()].1);
     }
     mark(&mut out, calibration.apex_px());
     out

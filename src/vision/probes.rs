@@ -260,11 +260,12 @@ mod tests {
         };
         let [x, y] = apex;
         Estimate {
-            edges: [
-                Some(fit([x - 80.0, y - 100.0], [x + 20.0, y - 100.0])),
-                Some(fit([x - 40.0, y - 100.0], apex)),
-                Some(fit(apex, [x + 10.0, y - 100.0])),
-            ],
+            edges: std::array::from_fn(|k| match k {
+                0 => Some(fit([x - 80.0, y - 100.0], [x + 20.0, y - 100.0])),
+                1 => Some(fit([x - 40.0, y - 100.0], apex)),
+                2 => Some(fit(apex, [x + 10.0, y - 100.0])),
+                _ => None,
+            }),
             scale: Some(scale),
             ..at(apex, confidence)
         }

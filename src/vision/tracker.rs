@@ -29,7 +29,7 @@ use super::rigid::{calibrate as calibrate_rigid, RigidError, RigidTemplate, Rigi
 use super::stations;
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
-use super::{Edge, EdgeFit, Estimate, Miss, VisionError};
+use super::{Edge, EdgeFit, Estimate, Miss, VisionError, MAX_EDGES};
 use crate::model::Cantilever;
 
 /// How far the coherent search looks around the last rotation, radians.
@@ -635,8 +635,8 @@ impl PyramidTracker {
         if confidence < MIN_CONFIDENCE {
             return Estimate::missed(Miss::LowConfidence, confidence);
         }
-        let mut edges = [None; 3];
-        for e in 0..3 {
+        let mut edges = [None; MAX_EDGES];
+        for e in Edge::ALL.map(Edge::index) {
             let (Some(r), true) = (fit.edges[e], in_view[e]) else {
                 continue;
             };

@@ -322,10 +322,10 @@ fn search_binning(t: &RigidTemplate, width: u32) -> u32 {
     super::pyramid::binning_factor(width).min(fine)
 }
 
-/// The estimate of a verified fit: its pose, standard error and the first three edges'
-/// visible segments.
+/// The estimate of a verified fit: its pose, standard error and every edge's visible
+/// segment.
 fn estimate(t: &RigidTemplate, fit: &Fit) -> Estimate {
-    let mut edges = [None; 3];
+    let mut edges = [None; MAX_EDGES];
     for (slot, (e, seen)) in edges.iter_mut().zip(t.edges.iter().zip(&fit.edges)) {
         *slot = seen.map(|s| EdgeFit {
             start_px: fit.pose.place(e, s.span[0]),
@@ -358,8 +358,13 @@ mod tests {
     /// whose upper corner is the apex, rotated by `deg` (screen) about the apex at
     /// `apex`, 4x4 supersampled, probe 180 on 60, with seeded noise of `noise`.
     fn needle(deg: f64, apex: [f64; 2], noise: f64, seed: u64) -> GrayImage {
-        let psi = image_rad_from_screen_deg(deg);
         let shape = [[-400.0, -30.0], [0.0, 0.0], [0.0, 12.0], [-400.0, 60.0]];
+        body(&shape, deg, apex, noise, seed)
+    }
+
+    /// The polygon `shape` (pixels from the apex) drawn as [`needle`] draws its own.
+    fn body(shape: &[[f64; 2]], deg: f64, apex: [f64; 2], noise: f64, seed: u64) -> GrayImage {
+        let psi = image_rad_from_screen_deg(deg);
         let poly: Vec<[f64; 2]> = shape.iter().map(|p| add(apex, rotate(*p, psi))).collect();
         let inside = |x: f64, y: f64| {
             let mut wind = false;
@@ -558,6 +563,44 @@ mod tests {
             ("lower".into(), on([-200.0, 37.0], [-20.0, 13.8])),
             ("end".into(), on([0.0, 1.0], [0.0, 11.0])),
         ]
+    }
+
+    /// A chisel-ended probe of four edges: every one of them is in its estimate, and
+    /// drawn in its colour.
+    #[test]
+    fn every_edge_of_a_probe_is_in_its_estimate() {
+        let shape = [
+            [-400.0, -30.0],
+            [0.0, 0.0],
+            [12.0, 20.0],
+            [0.0, 40.0],
+            [-400.0, 70.0],
+        ];
+        let apex = [250.0, 100.0];
+        let on = |a: [f64; 2], b: [f64; 2]| {
+            (1..4)
+                .map(|k| add(apex, add(a, scale(sub(b, a), f64::from(k) / 4.0))))
+                .collect::<Vec<_>>()
+        };
+        let clicks: Vec<(String, Vec<[f64; 2]>)> = vec![
+            ("upper".into(), on([-200.0, -15.0], [-20.0, -1.5])),
+            ("front".into(), on([0.0, 0.0], [12.0, 20.0])),
+            ("back".into(), on([12.0, 20.0], [0.0, 40.0])),
+            ("lower".into(), on([-200.0, 55.0], [-20.0, 41.5])),
+        ];
+        let reference = body(&shape, 0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks, ["upper", "front"]).unwrap();
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let frame = body(&shape, 5.0, [240.0, 90.0], 4.0, 2);
+        let e = tracker.track(&frame);
+        assert!(e.detected, "{e:?}");
+        assert_eq!(e.edges.iter().flatten().count(), 4, "{:?}", e.edges);
+        let overlay = crate::vision::draw_overlay(&frame, &e);
+        let fourth = crate::vision::NAMED_EDGE_COLOURS[3].1;
+        assert!(
+            overlay.pixels().any(|p| *p == fourth),
+            "the fourth edge is drawn"
+        );
     }
 
     #[test]
