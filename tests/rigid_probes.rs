@@ -63,16 +63,21 @@ fn quantile(v: &[f64], q: f64) -> f64 {
     s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
+/// A session's clicks as calibration takes them.
+fn clicks_of(session: &ToolSession) -> Vec<(String, Vec<[f64; 2]>)> {
+    session
+        .clicks
+        .iter()
+        .map(|(name, points)| (name.to_string(), points.clone()))
+        .collect()
+}
+
 /// Tracks `session`'s frames with a tracker calibrated on its reference, and the
 /// `others`' frames (other kinds of tool: none of them is this probe) with the same.
 fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out: &mut Measured) {
     let mut frame = GrayImage::new(1, 1);
     render_tool_into(&session.reference, crops, &mut frame);
-    let clicks: Vec<(String, Vec<[f64; 2]>)> = session
-        .clicks
-        .iter()
-        .map(|(n, p)| (n.to_string(), p.clone()))
-        .collect();
+    let clicks = clicks_of(session);
     let template = calibrate_rigid(&frame, &clicks, session.apex)
         .unwrap_or_else(|e| panic!("{} reference: {e}", session.kind.name()));
     if std::env::var("RIGID_DEBUG").is_ok() {
@@ -422,11 +427,7 @@ fn reference_edge_errors(seeds: &[u64]) -> Vec<(String, Vec<f64>)> {
         for kind in ToolKind::ALL {
             for session in tool_suite(kind, seed, SESSIONS, FRAMES, crops.len()) {
                 let truth = render_tool_into(&session.reference, &crops, &mut frame);
-                let clicks: Vec<(String, Vec<[f64; 2]>)> = session
-                    .clicks
-                    .iter()
-                    .map(|(name, points)| (name.to_string(), points.clone()))
-                    .collect();
+                let clicks = clicks_of(&session);
                 let template = calibrate_rigid(&frame, &clicks, session.apex).unwrap();
                 for edge in &template.edges {
                     let seg = truth.edge(edge.name.as_str()).unwrap();
@@ -499,11 +500,7 @@ fn automatic_calibration_tracks_as_the_clicks_do() {
                     kind.name(),
                     found.edges.len()
                 );
-                let clicks: Vec<(String, Vec<[f64; 2]>)> = session
-                    .clicks
-                    .iter()
-                    .map(|(name, points)| (name.to_string(), points.clone()))
-                    .collect();
+                let clicks = clicks_of(&session);
                 let hand = calibrate_rigid(&reference, &clicks, session.apex).unwrap();
                 let tracker = |t| {
                     RigidTracker::new(t, DEFAULT_WINDOW_DEG)

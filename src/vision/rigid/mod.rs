@@ -348,6 +348,33 @@ fn estimate(t: &RigidTemplate, fit: &Fit) -> Estimate {
     }
 }
 
+/// A blunt needle's template, for the unit tests: the upper flank and the end face meet
+/// at the apex (the origin); the lower flank lies 12 px below, away from it.
+#[cfg(test)]
+fn needle_template() -> RigidTemplate {
+    let edge = |name: &str, normal: [f64; 2], offset: f64, extent: [f64; 2]| RigidEdge {
+        name: EdgeName::intern(name),
+        normal,
+        offset,
+        extent,
+        open: [true, false],
+        bow: 0.0,
+        bow_ends: extent,
+        polarity: 1.0,
+        step: 100.0,
+    };
+    RigidTemplate {
+        edges: vec![
+            edge("upper", [0.0, 1.0], 0.0, [-200.0, 0.0]),
+            edge("end", [-1.0, 0.0], 0.0, [0.0, 12.0]),
+            edge("lower", [0.0, -1.0], -12.0, [-200.0, 0.0]),
+        ],
+        apex: [0.0, 0.0],
+        apex_edges: [0, 1],
+        angle_sigma_rad: 1e-4,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

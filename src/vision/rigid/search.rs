@@ -391,31 +391,11 @@ fn peaks(row: &[f32]) -> [Option<(usize, f32)>; LINES_PER_BIN] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::{EdgeName, RigidEdge};
-
     /// A blunt needle's template, its apex edges named end face first.
     fn end_face_first() -> RigidTemplate {
-        let edge = |name: &str, normal: [f64; 2], offset: f64, extent: [f64; 2]| RigidEdge {
-            name: EdgeName::intern(name),
-            normal,
-            offset,
-            extent,
-            open: [true, false],
-            bow: 0.0,
-            bow_ends: extent,
-            polarity: 1.0,
-            step: 100.0,
-        };
-        RigidTemplate {
-            edges: vec![
-                edge("end", [-1.0, 0.0], 0.0, [0.0, 12.0]),
-                edge("upper", [0.0, 1.0], 0.0, [-200.0, 0.0]),
-                edge("lower", [0.0, -1.0], -12.0, [-200.0, 0.0]),
-            ],
-            apex: [0.0, 0.0],
-            apex_edges: [0, 1],
-            angle_sigma_rad: 1e-4,
-        }
+        let mut t = crate::vision::rigid::needle_template();
+        t.edges.swap(0, 1);
+        t
     }
 
     /// Where the first apex edge's support ends places the apex: the long flank's,
