@@ -56,6 +56,10 @@ const RETRACES: usize = 3;
 /// tens of degrees.
 const SAME_DIRECTION: f64 = 5.0;
 const SAME_LINE_PX: f64 = 3.0;
+/// Two pieces of the outline whose calibrated lines lie within this angle (degrees)
+/// and distance (pixels) of each other are one edge.
+const ONE_LINE_DEG: f64 = 1.0;
+const ONE_LINE_PX: f64 = 2.0;
 /// Where along each edge's traced stretch the clicks fall.
 const CLICK_SHARES: [f64; 3] = [0.1, 0.5, 0.9];
 
@@ -95,31 +99,60 @@ fn calibrated(
     apex: [f64; 2],
     w: &Wedge,
 ) -> Result<(RigidAutoClicks, RigidTemplate), AutoCalError> {
-    let (edges, apex_at) = outline(reference, apex, w)?;
-    if edges.len() < 3 {
-        return Err(AutoCalError::NotFound {
-            edges: "an edge away from the tip point",
-            reason: "the outline from the apex edges leaves the frame or fades before \
-                     another edge; without one the template is any corner of the apex \
-                     edges' angle"
-                .into(),
-        });
-    }
-    let names: Vec<String> = (1..=edges.len()).map(|k| format!("e{k}")).collect();
-    let clicks = RigidAutoClicks {
-        edges: names
-            .iter()
-            .zip(&edges)
-            .map(|(n, t)| (n.clone(), t.clicks(&CLICK_SHARES)))
-            .collect(),
-        apex: apex_at.map(|k| names[k].clone()),
+    let (mut edges, mut apex_at) = outline(reference, apex, w)?;
+    let (clicks, template) = loop {
+        if edges.len() < 3 {
+            return Err(AutoCalError::NotFound {
+                edges: "an edge away from the tip point",
+                reason: "the outline from the apex edges leaves the frame or fades before \
+                         another edge; without one the template is any corner of the apex \
+                         edges' angle"
+                    .into(),
+            });
+        }
+        let names: Vec<String> = (1..=edges.len()).map(|k| format!("e{k}")).collect();
+        let clicks = RigidAutoClicks {
+            edges: names
+                .iter()
+                .zip(&edges)
+                .map(|(n, t)| (n.clone(), t.clicks(&CLICK_SHARES)))
+                .collect(),
+            apex: apex_at.map(|k| names[k].clone()),
+        };
+        let template = calibrate(
+            reference,
+            &clicks.edges,
+            [clicks.apex[0].as_str(), clicks.apex[1].as_str()],
+        )
+        .map_err(VisionError::from)?;
+        // Two pieces of the outline that calibrate to one line are one edge, its trace
+        // stopped short (by a particle on it): joined, and calibrated again.
+        let Some(k) = (0..edges.len() - 1).find(|&k| {
+            let (a, b) = (&template.edges[k], &template.edges[k + 1]);
+            dot(a.normal, b.normal) >= ONE_LINE_DEG.to_radians().cos()
+                && (a.offset - b.offset).abs() <= ONE_LINE_PX
+                && !(apex_at.contains(&k) && apex_at.contains(&(k + 1)))
+        }) else {
+            break (clicks, template);
+        };
+        let (a, b) = (edges[k], edges.remove(k + 1));
+        let along = |p: [f64; 2]| dot(sub(p, a.point), a.dir);
+        let ends = [
+            a.span.0,
+            a.span.1,
+            along(b.at(b.span.0)),
+            along(b.at(b.span.1)),
+        ];
+        edges[k].span = (
+            ends.iter().copied().fold(f64::INFINITY, f64::min),
+            ends.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        for i in apex_at.iter_mut() {
+            if *i > k {
+                *i -= 1;
+            }
+        }
     };
-    let template = calibrate(
-        reference,
-        &clicks.edges,
-        [clicks.apex[0].as_str(), clicks.apex[1].as_str()],
-    )
-    .map_err(VisionError::from)?;
     let at_home = Pose {
         psi: 0.0,
         scale: 1.0,
@@ -353,6 +386,22 @@ mod tests {
             "{:?}",
             template.apex
         );
+    }
+
+    /// A dark particle on the upper flank stops its trace: the piece beyond is that
+    /// flank going on, one edge.
+    #[test]
+    fn a_flank_interrupted_by_a_particle_is_one_edge() {
+        let mut img = needle();
+        for (x, y, p) in img.enumerate_pixels_mut() {
+            let (dx, dy) = (f64::from(x) - 150.0, f64::from(y) - 185.0);
+            if dx.hypot(dy) <= 8.0 {
+                *p = image::Luma([60]);
+            }
+        }
+        let (clicks, template) = auto_calibrate(&img, [301.0, 199.0]).unwrap();
+        assert_eq!(clicks.edges.len(), 3, "{:?}", clicks.edges);
+        assert_eq!(template.edges.len(), 3);
     }
 
     /// A wedge whose two edges both leave the frame is any corner of its angle: no
