@@ -184,16 +184,16 @@ fn outline(
     let axis = unit_of(add(dirs[0], dirs[1]));
     let mut chains: [Vec<Traced>; 2] = [Vec::new(), Vec::new()];
     for k in 0..2 {
+        // The edge's direction for the message: degrees CCW on screen, in (-180, 180].
+        let screen_deg = 180.0 - (180.0 + w.ends[k].to_degrees()).rem_euclid(360.0);
         let first =
             follow(img, apex, dirs[k], sub(axis, dirs[k]), w.polarity).ok_or_else(|| {
                 AutoCalError::NotFound {
                     edges: "an apex edge",
                     reason: format!(
-                        "the step along the edge leaving ({:.1}, {:.1}) at {:.0} deg fades within \
-                     a few pixels",
-                        apex[0],
-                        apex[1],
-                        w.ends[k].to_degrees()
+                        "the step along the edge leaving ({:.1}, {:.1}) at {screen_deg:.0} deg \
+                         (CCW on screen) fades within a few pixels",
+                        apex[0], apex[1]
                     ),
                 }
             })?;
