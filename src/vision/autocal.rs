@@ -244,13 +244,19 @@ pub(super) fn wedge_on(
     })
 }
 
-/// The step across the ray from `apex` at `angle` (radians) at each whole pixel of
-/// [`RAYS_PX`] along it: the level a little counter-clockwise (in image angles) of it
-/// less the level a little clockwise; `None` where outside the image.
-fn ray_steps(img: &GrayImage, apex: [f64; 2], angle: f64) -> Vec<Option<f64>> {
+/// The step across the ray from `apex` at `angle` (radians) at each whole pixel `along`
+/// it ([`RAYS_PX`] for the pyramid's faces): the level [`RAY_SIDE_PX`]
+/// counter-clockwise (in image angles) of it less the level as far clockwise; `None`
+/// where outside the image.
+pub(super) fn ray_steps(
+    img: &GrayImage,
+    apex: [f64; 2],
+    angle: f64,
+    along: std::ops::Range<usize>,
+) -> Vec<Option<f64>> {
     let u = unit(angle);
     let n = scale([-u[1], u[0]], RAY_SIDE_PX);
-    (RAYS_PX.0..RAYS_PX.1)
+    along
         .map(|r| {
             let p = add(apex, scale(u, r as f64));
             Some(bilinear(img, add(p, n))? - bilinear(img, sub(p, n))?)
@@ -266,7 +272,7 @@ pub(super) fn rays(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalErro
     let step = std::f64::consts::TAU / RING_SAMPLES as f64;
     let mean_step: Vec<f64> = (0..RING_SAMPLES)
         .map(|k| {
-            let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step)
+            let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step, RAYS_PX.0..RAYS_PX.1)
                 .into_iter()
                 .flatten()
                 .collect();
@@ -304,7 +310,7 @@ pub(super) fn rays(img: &GrayImage, apex: [f64; 2]) -> Result<Wedge, AutoCalErro
     // Where along each ray its step is strongest, summed over FACE_START_PX either side.
     let strongest = [first, second].map(|k| {
         let sign = if k == first { polarity } else { -polarity };
-        let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step)
+        let steps: Vec<f64> = ray_steps(img, apex, k as f64 * step, RAYS_PX.0..RAYS_PX.1)
             .into_iter()
             .map(|v| sign * v.unwrap_or(0.0))
             .collect();

@@ -27,9 +27,10 @@ use image::GrayImage;
 
 use super::{calibrate, Pose, RigidTemplate, RigidTracker, MAX_EDGES};
 use crate::vision::autocal::{
-    rays, trace, traced, wedge_on, AutoCalError, Traced, Wedge, FACE_START_PX, LEVEL_PX, RING_PX,
+    ray_steps, rays, trace, traced, wedge_on, AutoCalError, Traced, Wedge, FACE_START_PX, LEVEL_PX,
+    RING_PX,
 };
-use crate::vision::geometry::{add, bilinear, dot, norm, scale, sub, unit};
+use crate::vision::geometry::{add, dot, norm, scale, sub, unit};
 use crate::vision::{VisionError, DEFAULT_WINDOW_DEG};
 
 /// Smallest ring around a corner, pixels: a short edge (a needle's blunt end) leaves
@@ -43,12 +44,11 @@ const BORDER_PX: f64 = LEVEL_PX.1 + 4.0;
 /// there; the ring is centred this far further on, pixels.
 const CORNER_AHEAD_PX: f64 = 2.0;
 /// Around a corner, the next edge's direction is looked for this far (degrees) either
-/// side of the ring's, in steps of [`TURN_STEP_DEG`], by its step along a ray over
-/// [`TURN_RAY_PX`] pixels from the corner, read [`TURN_SIDE_PX`] either side.
+/// side of the ring's, in steps of [`TURN_STEP_DEG`], by its mean step across a ray
+/// over [`TURN_RAY_PX`] pixels from the corner (both included).
 const TURN_SEARCH_DEG: f64 = 45.0;
 const TURN_STEP_DEG: f64 = 0.5;
 const TURN_RAY_PX: (usize, usize) = (3, 30);
-const TURN_SIDE_PX: f64 = 1.5;
 /// Re-traces of an edge along the line found so far.
 const RETRACES: usize = 3;
 /// A next edge within this angle (degrees) of the last, starting within this distance
@@ -325,30 +325,23 @@ fn strongest_ray(
     let steps = (TURN_SEARCH_DEG / TURN_STEP_DEG) as i32;
     let mut best: Option<(f64, [f64; 2])> = None;
     for k in -steps..=steps {
-        let u = unit(near + f64::from(k) * TURN_STEP_DEG.to_radians());
-        let n = [-u[1], u[0]];
-        // The probe lies on the body's side of the ray.
-        let n = if dot(n, body) < 0.0 {
-            scale(n, -1.0)
+        let angle = near + f64::from(k) * TURN_STEP_DEG.to_radians();
+        let u = unit(angle);
+        // `ray_steps` reads counter-clockwise less clockwise; the probe lies on the
+        // body's side of the ray.
+        let side = if dot([-u[1], u[0]], body) < 0.0 {
+            -1.0
         } else {
-            n
+            1.0
         };
-        let (mut sum, mut count) = (0.0, 0);
-        for r in TURN_RAY_PX.0..=TURN_RAY_PX.1 {
-            let p = add(corner, scale(u, r as f64));
-            let (Some(a), Some(b)) = (
-                bilinear(img, add(p, scale(n, TURN_SIDE_PX))),
-                bilinear(img, sub(p, scale(n, TURN_SIDE_PX))),
-            ) else {
-                continue;
-            };
-            sum += polarity * (a - b);
-            count += 1;
-        }
-        if 2 * count < TURN_RAY_PX.1 - TURN_RAY_PX.0 {
+        let steps: Vec<f64> = ray_steps(img, corner, angle, TURN_RAY_PX.0..TURN_RAY_PX.1 + 1)
+            .into_iter()
+            .flatten()
+            .collect();
+        if 2 * steps.len() < TURN_RAY_PX.1 - TURN_RAY_PX.0 {
             continue;
         }
-        let mean = sum / count as f64;
+        let mean = steps.iter().map(|s| polarity * side * s).sum::<f64>() / steps.len() as f64;
         if mean > 0.0 && best.is_none_or(|b| mean > b.0) {
             best = Some((mean, u));
         }

@@ -393,35 +393,29 @@ fn find_edge(
             }
         }
     }
-    let mut found = Found {
+    let (line, bow, bow_ends, angle_sigma) = fitted(&points, line.normal);
+    Ok(Found {
         line,
         points,
         open,
         polarity,
         step,
-        bow: 0.0,
-        bow_ends: [0.0; 2],
-        angle_sigma: 0.0,
-    };
-    let points = found.points.clone();
-    found.fit_through(&points);
-    Ok(found)
+        bow,
+        bow_ends,
+        angle_sigma,
+    })
 }
 
-impl Found {
-    /// The edge's line, bow and direction's error fitted through `points`.
-    fn fit_through(&mut self, points: &[[f64; 2]]) {
-        let line = fit_line(points, self.line.normal);
-        let shape = Shape::fit(points, &line);
-        let sigma = shape.sigma.max(0.05);
-        self.line = shape.chord;
-        self.bow = shape.bow;
-        self.bow_ends = shape.ends;
-        // Points SPACING_PX apart each average a run of RUN pixels along the edge, so
-        // neighbours share their noise: about RUN / SPACING_PX of them count as one.
-        self.angle_sigma =
-            sigma / shape.spread.max(1.0) * (RUN as f64 / SPACING_PX).max(1.0).sqrt();
-    }
+/// An edge's line (its chord), bow and bow ends, and its direction's standard error,
+/// fitted through `points` on the side `normal` faces.
+fn fitted(points: &[[f64; 2]], normal: [f64; 2]) -> (Line, f64, [f64; 2], f64) {
+    let line = fit_line(points, normal);
+    let shape = Shape::fit(points, &line);
+    let sigma = shape.sigma.max(0.05);
+    // Points SPACING_PX apart each average a run of RUN pixels along the edge, so
+    // neighbours share their noise: about RUN / SPACING_PX of them count as one.
+    let angle_sigma = sigma / shape.spread.max(1.0) * (RUN as f64 / SPACING_PX).max(1.0).sqrt();
+    (shape.chord, shape.bow, shape.ends, angle_sigma)
 }
 
 /// Each edge fitted again without its points within [`CORNER_FIT_PX`] of another
@@ -445,7 +439,7 @@ fn clear_of_corners(found: Vec<Found>) -> Vec<Found> {
                 })
                 .collect();
             if clear.len() >= MIN_CLEAR_POINTS && clear.len() < f.points.len() {
-                f.fit_through(&clear);
+                (f.line, f.bow, f.bow_ends, f.angle_sigma) = fitted(&clear, f.line.normal);
             }
             f
         })

@@ -511,7 +511,12 @@ impl Fitter {
     }
 
     fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
-        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
+        Self::steps_within(t, pose, p, HELD_PX)
+    }
+
+    /// Station `p` steps by [`HOLD_SHARE`] of its edge's step within `px` of the edge.
+    fn steps_within(t: &RigidTemplate, pose: &Pose, p: &Point, px: f64) -> bool {
+        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= px
     }
 
     /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
@@ -532,9 +537,7 @@ impl Fitter {
             let slot = if from_low { k } else { nearest - 1 - k };
             held[slot] = Self::holds_final(t, pose, p);
             if slot == 0 {
-                steps = p.in_view
-                    && p.step >= HOLD_SHARE
-                    && Self::residual(t, pose, p).abs() <= NEAREST_PX;
+                steps = Self::steps_within(t, pose, p, NEAREST_PX);
             }
         }
         steps && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
@@ -558,10 +561,6 @@ impl Fitter {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn template() -> RigidTemplate {
-        crate::vision::rigid::needle_template()
-    }
 
     /// Stations along every edge, each holding its step where the pose puts it, the
     /// lower flank's in view or not.
@@ -589,7 +588,7 @@ mod tests {
     /// `scale-unseen`; with the lower flank in view it is verified.
     #[test]
     fn a_corner_alone_does_not_show_the_probe() {
-        let t = template();
+        let t = crate::vision::rigid::needle_template();
         let pose = Pose {
             psi: 0.0,
             scale: 1.0,
