@@ -18,8 +18,8 @@ mod tracker_support;
 use image::GrayImage;
 use nanoforce::scene::{render_tool_into, tool_suite, ToolKind, ToolSession, TOOL_MAG_RATIO};
 use nanoforce::vision::{
-    auto_calibrate_rigid, calibrate_rigid, Estimate, RigidPose, RigidTracker, ScaleRange,
-    DEFAULT_WINDOW_DEG, RIGID_SCALES,
+    auto_calibrate_rigid, calibrate_rigid, Estimate, RigidPose, RigidTemplate, RigidTracker,
+    ScaleRange, DEFAULT_WINDOW_DEG, RIGID_SCALES,
 };
 use tracker_support::rendered::real_crops;
 
@@ -55,6 +55,13 @@ fn scales() -> ScaleRange {
         Ok("widest") => RIGID_SCALES,
         _ => ScaleRange::new(TOOL_MAG_RATIO[0] / 1.1, TOOL_MAG_RATIO[1] * 1.1),
     }
+}
+
+/// A tracker of `template` over the scales the lab states.
+fn lab_tracker(template: RigidTemplate) -> RigidTracker {
+    RigidTracker::new(template, DEFAULT_WINDOW_DEG)
+        .with_scales(scales())
+        .unwrap()
 }
 
 fn quantile(v: &[f64], q: f64) -> f64 {
@@ -99,9 +106,7 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
                 .collect::<Vec<_>>()
         );
     }
-    let mut tracker = RigidTracker::new(template, DEFAULT_WINDOW_DEG)
-        .with_scales(scales())
-        .unwrap();
+    let mut tracker = lab_tracker(template);
     let only: Option<usize> = std::env::var("ONLY_FRAME")
         .ok()
         .and_then(|s| s.parse().ok());
@@ -503,14 +508,9 @@ fn automatic_calibration_tracks_as_the_clicks_do() {
                 );
                 let clicks = clicks_of(&session);
                 let hand = calibrate_rigid(&reference, &clicks, session.apex).unwrap();
-                let tracker = |t| {
-                    RigidTracker::new(t, DEFAULT_WINDOW_DEG)
-                        .with_scales(scales())
-                        .unwrap()
-                };
                 let mut trackers = [
-                    (tracker(hand), &mut clicked),
-                    (tracker(template), &mut automatic),
+                    (lab_tracker(hand), &mut clicked),
+                    (lab_tracker(template), &mut automatic),
                 ];
                 for spec in &session.frames {
                     let truth = render_tool_into(spec, &crops, &mut frame);
