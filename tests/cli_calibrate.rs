@@ -389,4 +389,30 @@ fn a_rigid_probe_is_calibrated_from_one_pixel_near_its_tip_point() {
     // --rigid without --auto is refused by the parser.
     let out = calibrate(&["--rigid", "--apex", &near]);
     assert!(!out.status.success());
+    // Without --apex the needle, the body entering from a side, gives its tip point:
+    // a corner of its end, the block again reading the reference at zero.
+    let out = calibrate(&["--auto", "--rigid"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let block = String::from_utf8(out.stdout).unwrap();
+    let row = replay_reference(dir.path(), &block, &image);
+    assert_eq!(row[1], "1", "{row:?}");
+    let angle: f64 = row[2].parse().unwrap();
+    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    // A frame without a body entering from a side has no tip point to take.
+    let blank = dir.path().join("blank.png");
+    image::GrayImage::from_pixel(320, 240, image::Luma([90]))
+        .save(&blank)
+        .unwrap();
+    let out = Command::new(BIN)
+        .args(["calibrate", "--auto", "--rigid", "--image"])
+        .arg(&blank)
+        .args(["--overlay", overlay.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--apex"), "{err}");
 }

@@ -39,9 +39,11 @@ calibrated from two or more named straight edges, each given as --edge NAME=\"X,
 apex and [tracker.calibration.edges]; the overlay draws each edge in the colour the \
 block names. With --auto --rigid --apex X,Y (a pixel on or near its tip point), \
 calibrate follows the probe's outline from there, edge after edge, until it leaves the \
-frame; the edges are named e1, e2, ... in their order around the outline, or by \
---names in that order. It refuses an outline without an edge away from the tip point, \
-or whose edges do not verify as one probe on the reference.",
+frame; the edges are named e1, e2, ... in their order around the outline (rename them \
+in the block). Without --apex, the tip point is the point of the largest body entering \
+from a frame side (either polarity) that reaches farthest into the frame along its \
+axis; give --apex for another corner. It refuses an outline without an edge away from \
+the tip point, or whose edges do not verify as one probe on the reference.",
     after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
 --red 156.8,33.4 228.3,57.3 --blue 230.7,114.2 260.6,192.0 --green 282.5,199.8 314.8,142.9 \\\n      \
 --overlay calibration.png >> probe.toml\n  \
@@ -73,8 +75,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "X,Y", requires = "auto", value_parser = parse_point)]
     pub apex: Option<[f64; 2]>,
     /// With --auto: a rigid probe of straight edges, found around its outline from
-    /// --apex.
-    #[arg(long, requires_all = ["auto", "apex"])]
+    /// --apex, or from the point of the body entering the frame that reaches farthest.
+    #[arg(long, requires = "auto")]
     pub rigid: bool,
     /// A rigid probe's named edge and two or more pixels on it, as "NAME=X,Y X,Y ..."
     /// (repeat for each edge, two or more; with --apex-edges).
@@ -258,18 +260,15 @@ fn calibrate_named(
     Ok(ExitCode::SUCCESS)
 }
 
-/// A rigid probe's calibration from one pixel near its tip point (`--auto --rigid`):
-/// the block printed with the edges found as clicks, the overlay written.
+/// A rigid probe's calibration from one pixel near its tip point, or from none
+/// (`--auto --rigid`): the block printed with the edges found as clicks, the overlay written.
 fn auto_calibrate_named(
     args: &CalibrateArgs,
     reference: &image::GrayImage,
     overlay_path: &std::path::Path,
 ) -> anyhow::Result<ExitCode> {
     let origin = args.pixel_origin;
-    let apex = args
-        .apex
-        .map(|p| origin.input(p))
-        .context("--auto --rigid needs --apex X,Y: a pixel on or near the tip point")?;
+    let apex = args.apex.map(|p| origin.input(p));
     let (found, template) = auto_calibrate_rigid(reference, apex)
         .with_context(|| format!("calibrating on {}", args.image.display()))?;
     let clicks = CalibrationConfig {

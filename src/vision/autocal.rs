@@ -735,20 +735,40 @@ fn red_edge(
 /// The apex of the largest body touching a frame side: its point farthest from the
 /// beam's axis.
 pub fn find_apex(img: &GrayImage) -> Result<[f64; 2], AutoCalError> {
-    let mut hist = [0u64; 256];
-    for p in img.pixels() {
-        hist[p[0] as usize] += 1;
-    }
-    let all = otsu(&hist, 0);
-    let bright = otsu(&hist, all + 1);
     let mut why = String::new();
-    for level in [bright, all] {
-        match body_apex(img, level) {
-            Ok(apex) => return Ok(apex),
+    for level in body_levels(img) {
+        match entering_body(img, level) {
+            Ok(body) => {
+                let n = [-body.axis[1], body.axis[0]];
+                let off = |p: &[f64; 2]| dot(n, sub(*p, body.centre)).abs();
+                let apex = body
+                    .pixels
+                    .iter()
+                    .copied()
+                    .max_by(|a, b| off(a).total_cmp(&off(b)));
+                return Ok(apex.unwrap_or(body.centre));
+            }
             Err(e) => why = e,
         }
     }
     Err(AutoCalError::NoProbe(why))
+}
+
+/// The levels a body is looked for above: the one splitting the bright class, then
+/// Otsu's level over all grey levels (the probe being the brightest).
+pub fn body_levels(img: &GrayImage) -> [usize; 2] {
+    let hist = histogram(img);
+    let all = otsu(&hist, 0);
+    [otsu(&hist, all + 1), all]
+}
+
+/// The grey levels' histogram.
+fn histogram(img: &GrayImage) -> [u64; 256] {
+    let mut hist = [0u64; 256];
+    for p in img.pixels() {
+        hist[p[0] as usize] += 1;
+    }
+    hist
 }
 
 /// Otsu's level over the grey levels from `from` up.
@@ -772,16 +792,38 @@ fn otsu(hist: &[u64; 256], from: usize) -> usize {
     level.min(254)
 }
 
-/// The apex of the largest body above `level` touching a frame side.
-fn body_apex(img: &GrayImage, level: usize) -> Result<[f64; 2], String> {
+/// The largest body touching a frame side, and the axis it enters along.
+pub struct EnteringBody {
+    /// Its pixels' centres.
+    pub pixels: Vec<[f64; 2]>,
+    /// A point on its axis, and the axis's direction into the frame from the side it
+    /// enters from (a unit vector).
+    pub centre: [f64; 2],
+    pub axis: [f64; 2],
+}
+
+/// The largest body above `level` touching a frame side: its pixels and the axis
+/// through those within a fifth of its depth from the side it touches most.
+pub fn entering_body(img: &GrayImage, level: usize) -> Result<EnteringBody, String> {
+    entering_bodies(img, level, 1).map(|mut bodies| bodies.swap_remove(0))
+}
+
+/// The `most` largest bodies above `level` touching a frame side, largest first (as
+/// [`entering_body`]); an error when none is of a probe's size.
+pub fn entering_bodies(
+    img: &GrayImage,
+    level: usize,
+    most: usize,
+) -> Result<Vec<EnteringBody>, String> {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let raw = img.as_raw();
+    let on = |i: usize| raw[i] as usize > level;
     let mut label = vec![0u32; w * h];
-    let mut best: Option<Vec<usize>> = None;
+    let mut found: Vec<Vec<usize>> = Vec::new();
     let mut queue = VecDeque::new();
     let mut next = 0;
     for seed in 0..w * h {
-        if label[seed] != 0 || (raw[seed] as usize) <= level {
+        if label[seed] != 0 || !on(seed) {
             continue;
         }
         next += 1;
@@ -792,7 +834,7 @@ fn body_apex(img: &GrayImage, level: usize) -> Result<[f64; 2], String> {
             body.push(i);
             let (x, y) = (i % w, i / w);
             let mut visit = |j: usize| {
-                if label[j] == 0 && raw[j] as usize > level {
+                if label[j] == 0 && on(j) {
                     label[j] = next;
                     queue.push_back(j);
                 }
@@ -814,20 +856,35 @@ fn body_apex(img: &GrayImage, level: usize) -> Result<[f64; 2], String> {
             let (x, y) = (i % w, i / w);
             x == 0 || y == 0 || x == w - 1 || y == h - 1
         });
-        if touches && best.as_ref().is_none_or(|b| body.len() > b.len()) {
-            best = Some(body);
+        if touches {
+            found.push(body);
         }
     }
-    let body = best.ok_or_else(|| format!("nothing above grey level {level} touches a side"))?;
-    if body.len() < (w * h) / 500 {
+    found.sort_by_key(|b| std::cmp::Reverse(b.len()));
+    let Some(largest) = found.first() else {
+        return Err(format!("nothing above grey level {level} touches a side"));
+    };
+    if largest.len() < (w * h) / 500 {
         return Err(format!(
             "the largest body above grey level {level} touching a side has {} pixels",
-            body.len()
+            largest.len()
         ));
     }
-    // The side it enters from: the one it touches most; the beam's axis through its
-    // pixels within a fifth of its depth from that side.
-    let xy = |i: usize| [(i % w) as f64, (i / w) as f64];
+    Ok(found
+        .iter()
+        .take(most)
+        .take_while(|b| b.len() >= (w * h) / 500)
+        .map(|b| with_axis(b, w, h))
+        .collect())
+}
+
+/// A body's pixels (indices into a `w` x `h` frame) and the axis through those within
+/// a fifth of its depth from the side it touches most.
+fn with_axis(body: &[usize], w: usize, h: usize) -> EnteringBody {
+    let pixels: Vec<[f64; 2]> = body
+        .iter()
+        .map(|&i| [(i % w) as f64, (i / w) as f64])
+        .collect();
     let sides = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]];
     let depth = |s: usize, p: [f64; 2]| match s {
         0 => p[0],
@@ -836,31 +893,25 @@ fn body_apex(img: &GrayImage, level: usize) -> Result<[f64; 2], String> {
         _ => (h - 1) as f64 - p[1],
     };
     let side = (0..4)
-        .max_by_key(|&s| body.iter().filter(|&&i| depth(s, xy(i)) < 0.5).count())
+        .max_by_key(|&s| pixels.iter().filter(|&&p| depth(s, p) < 0.5).count())
         .unwrap_or(0);
-    let reach = body.iter().map(|&i| depth(side, xy(i))).fold(0.0, f64::max);
-    let near: Vec<[f64; 2]> = body
+    let reach = pixels.iter().map(|&p| depth(side, p)).fold(0.0, f64::max);
+    let near: Vec<[f64; 2]> = pixels
         .iter()
-        .map(|&i| xy(i))
+        .copied()
         .filter(|&p| depth(side, p) <= 0.2 * reach)
         .collect();
-    let (c, d) = fit_line(&near).unwrap_or((xy(body[0]), [-sides[side][1], sides[side][0]]));
-    let d = if dot(d, sides[side]) < 0.0 {
+    let (centre, d) = fit_line(&near).unwrap_or((pixels[0], [-sides[side][1], sides[side][0]]));
+    let axis = if dot(d, sides[side]) < 0.0 {
         scale(d, -1.0)
     } else {
         d
     };
-    let n = [-d[1], d[0]];
-    let apex = body
-        .iter()
-        .map(|&i| xy(i))
-        .max_by(|a, b| {
-            dot(n, sub(*a, c))
-                .abs()
-                .total_cmp(&dot(n, sub(*b, c)).abs())
-        })
-        .unwrap_or(c);
-    Ok(apex)
+    EnteringBody {
+        pixels,
+        centre,
+        axis,
+    }
 }
 
 #[cfg(test)]

@@ -76,8 +76,9 @@ pub use probes::{
     SINGLE_NAME,
 };
 pub use rigid::{
-    auto_calibrate as auto_calibrate_rigid, calibrate as calibrate_rigid, Pose as RigidPose,
-    RigidAutoClicks, RigidEdge, RigidError, RigidTemplate, RigidTracker, MAX_EDGES, RIGID_SCALES,
+    auto_calibrate as auto_calibrate_rigid, calibrate as calibrate_rigid,
+    find_tip_points as rigid_tip_points, Pose as RigidPose, RigidAutoClicks, RigidEdge, RigidError,
+    RigidTemplate, RigidTracker, MAX_EDGES, RIGID_SCALES,
 };
 pub use simd::set_avx2;
 pub use tracker::Tracker;

@@ -27,10 +27,10 @@ use image::GrayImage;
 
 use super::{calibrate, Pose, RigidTemplate, RigidTracker, MAX_EDGES};
 use crate::vision::autocal::{
-    ray_steps, rays, trace, traced, wedge_on, AutoCalError, Traced, Wedge, FACE_START_PX, LEVEL_PX,
-    RING_PX,
+    body_levels, entering_bodies, ray_steps, rays, trace, traced, wedge_on, AutoCalError, Traced,
+    Wedge, FACE_START_PX, LEVEL_PX, RING_PX,
 };
-use crate::vision::geometry::{add, dot, norm, scale, sub, unit};
+use crate::vision::geometry::{add, dot, norm, principal_axis, scale, sub, unit};
 use crate::vision::{VisionError, DEFAULT_WINDOW_DEG};
 
 /// Smallest ring around a corner, pixels: a short edge (a needle's blunt end) leaves
@@ -60,6 +60,12 @@ const SAME_LINE_PX: f64 = 3.0;
 /// and distance (pixels) of each other are one edge.
 const ONE_LINE_DEG: f64 = 1.0;
 const ONE_LINE_PX: f64 = 2.0;
+/// Bodies entering from a side, largest first, tried per polarity and level for a tip
+/// point (a substrate or a bright background may be larger than the probe).
+const BODIES: usize = 3;
+/// A tip point is a corner of the body's end: the pixel farthest from its axis among
+/// those within this distance (pixels, along the axis) of its farthest.
+const END_PX: f64 = 4.0;
 /// Where along each edge's traced stretch the clicks fall.
 const CLICK_SHARES: [f64; 3] = [0.1, 0.5, 0.9];
 
@@ -78,7 +84,101 @@ pub struct RigidAutoClicks {
 /// The ring's outline is taken first, the rays' where the ring's does not make a
 /// template: one with an edge away from the apex, whose own reference verifies as
 /// this probe where calibration placed it (one body, every edge stepping as found).
+///
+/// Without a pixel, the tip point is looked for where the probe is the largest body
+/// entering from a frame side (of either polarity): its point farthest along its axis
+/// from that side, the end a needle or a jaw reaches into the view with
+/// ([`find_tip_points`]). The first whose outline makes a template is taken.
 pub fn auto_calibrate(
+    reference: &GrayImage,
+    apex: Option<[f64; 2]>,
+) -> Result<(RigidAutoClicks, RigidTemplate), AutoCalError> {
+    let Some(apex) = apex else {
+        let mut first = None;
+        for tip in find_tip_points(reference)? {
+            match from_pixel(reference, tip) {
+                Ok(found) => return Ok(found),
+                Err(e) => {
+                    first.get_or_insert(e);
+                }
+            }
+        }
+        return Err(first.unwrap_or_else(|| AutoCalError::NoProbe("no body enters".into())));
+    };
+    from_pixel(reference, apex)
+}
+
+/// The candidate tip points of a probe entering the frame from a side: for each
+/// polarity (the brighter body first), each level of [`body_levels`] (Otsu's over all
+/// grey levels first: the bright class's shrinks a faint body's corners by pixels) and
+/// each of the [`BODIES`] largest bodies touching a side, a corner of its end (the
+/// [`END_PX`] rule) along its long axis, where that is clear of the border.
+pub fn find_tip_points(reference: &GrayImage) -> Result<Vec<[f64; 2]>, AutoCalError> {
+    let mut dark = reference.clone();
+    image::imageops::invert(&mut dark);
+    let mut tips = Vec::new();
+    let mut why = String::new();
+    for (img, bright) in [(reference, true), (&dark, false)] {
+        for level in body_levels(img).into_iter().rev() {
+            let bodies = match entering_bodies(img, level, BODIES) {
+                Ok(bodies) => bodies,
+                Err(e) => {
+                    why = e;
+                    continue;
+                }
+            };
+            for body in bodies {
+                // The whole body's long axis, into the frame (near the side it enters
+                // from, a needle or a jaw is as wide as it is deep).
+                let (centre, theta, _) = principal_axis(&body.pixels);
+                let mut axis = unit(theta);
+                if dot(axis, body.axis) < 0.0 {
+                    axis = scale(axis, -1.0);
+                }
+                let along = |p: &[f64; 2]| dot(axis, sub(*p, centre));
+                let across = |p: &[f64; 2]| dot([-axis[1], axis[0]], sub(*p, centre)).abs();
+                let far = body
+                    .pixels
+                    .iter()
+                    .map(along)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                // A corner of the end, not a pixel of noise on an end face across the
+                // axis: of the pixels within END_PX of the farthest, the one farthest
+                // from the axis.
+                let tip = body
+                    .pixels
+                    .iter()
+                    .copied()
+                    .filter(|p| along(p) >= far - END_PX)
+                    .max_by(|a, b| across(a).total_cmp(&across(b)));
+                match tip {
+                    // A body that reaches the border along its axis shows no tip.
+                    Some(t) if near_border(reference, add(t, axis)) => {
+                        let (side, grey) = if bright {
+                            ("above", level)
+                        } else {
+                            ("below", 255 - level)
+                        };
+                        why = format!(
+                            "the bodies entering from a side {side} grey level {grey} run \
+                             on to the border (at ({:.0}, {:.0}))",
+                            t[0], t[1]
+                        );
+                    }
+                    Some(t) if !tips.contains(&t) => tips.push(t),
+                    _ => {}
+                }
+            }
+        }
+    }
+    if tips.is_empty() {
+        return Err(AutoCalError::NoProbe(why));
+    }
+    Ok(tips)
+}
+
+/// [`auto_calibrate`] from a pixel on or near the tip point.
+fn from_pixel(
     reference: &GrayImage,
     apex: [f64; 2],
 ) -> Result<(RigidAutoClicks, RigidTemplate), AutoCalError> {
@@ -369,7 +469,7 @@ mod tests {
     #[test]
     fn a_needle_is_followed_round_from_its_tip() {
         let img = needle();
-        let (clicks, template) = auto_calibrate(&img, [301.0, 199.0]).unwrap();
+        let (clicks, template) = auto_calibrate(&img, Some([301.0, 199.0])).unwrap();
         let names: Vec<&str> = clicks.edges.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(names, ["e1", "e2", "e3"]);
         assert_eq!(template.edges.len(), 3);
@@ -379,6 +479,33 @@ mod tests {
             "{:?}",
             template.apex
         );
+    }
+
+    #[test]
+    fn without_a_pixel_the_tip_point_is_a_corner_of_the_end() {
+        // Bright on dark, and dark on bright: either polarity enters from the side.
+        let bright = needle();
+        let mut dark = bright.clone();
+        image::imageops::invert(&mut dark);
+        for img in [bright, dark] {
+            let (clicks, template) = auto_calibrate(&img, None).unwrap();
+            assert_eq!(clicks.edges.len(), 3);
+            let off = |q: [f64; 2]| norm(sub(template.apex, q));
+            assert!(
+                off([300.0, 200.0]).min(off([300.0, 240.0])) < 1.0,
+                "{:?}",
+                template.apex
+            );
+        }
+    }
+
+    #[test]
+    fn a_body_across_the_frame_has_no_tip_point() {
+        let bar = GrayImage::from_fn(400, 300, |_, y| {
+            image::Luma([if (140..160).contains(&y) { 200 } else { 60 }])
+        });
+        let err = auto_calibrate(&bar, None).unwrap_err().to_string();
+        assert!(err.contains("run on to the border"), "{err}");
     }
 
     /// A dark particle on the upper flank stops its trace: the piece beyond is that
@@ -392,7 +519,7 @@ mod tests {
                 *p = image::Luma([60]);
             }
         }
-        let (clicks, template) = auto_calibrate(&img, [301.0, 199.0]).unwrap();
+        let (clicks, template) = auto_calibrate(&img, Some([301.0, 199.0])).unwrap();
         assert_eq!(clicks.edges.len(), 3, "{:?}", clicks.edges);
         assert_eq!(template.edges.len(), 3);
     }
@@ -406,7 +533,7 @@ mod tests {
             let inside = x <= 300.0 && (y - 150.0).abs() <= 0.3 * (300.0 - x);
             image::Luma([if inside { 200 } else { 60 }])
         });
-        let err = auto_calibrate(&img, [300.0, 150.0])
+        let err = auto_calibrate(&img, Some([300.0, 150.0]))
             .unwrap_err()
             .to_string();
         assert!(err.contains("an edge away from the tip point"), "{err}");

@@ -23,7 +23,7 @@ mod station;
 
 use image::GrayImage;
 
-pub use autocal::{auto_calibrate, RigidAutoClicks};
+pub use autocal::{auto_calibrate, find_tip_points, RigidAutoClicks};
 pub use calibrate::calibrate;
 pub use fit::MAX_EDGES;
 
