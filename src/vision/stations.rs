@@ -620,9 +620,10 @@ const LOCATED_RATIO: f64 = 0.5;
 const FACE_TURN_DEG: f64 = 6.0;
 /// Most median distance of the located steps from their own line, pixels.
 const FACE_LINE_PX: f64 = 1.0;
-/// The turned line must show this many more stations' worth of the calibrated step
-/// than the predicted one (each station's ratio counted between 0 and 1).
-const TURNED_GAIN: f64 = 2.0;
+/// A predicted face is looked at for a turned one only when it shows at least this
+/// many stations' worth of the calibrated step less than all of it (each station's
+/// ratio counted between 0 and 1): a face shown along its length is this probe's.
+const TURNED_ROOM: f64 = 2.0;
 
 /// Longest cross-section [`locate_steps`] reads, pixels.
 const SECTION_MAX: usize = 64;
@@ -730,11 +731,11 @@ fn shown(p: &Profile) -> f64 {
 /// pass. Each station locates the step within [`FACE_SEARCH_PX`] of the prediction;
 /// the located steps are that face when at least [`HELD_SHARE`] of the stations
 /// locate one, they lie on one line within [`FACE_LINE_PX`], that line is turned, and
-/// it shows [`TURNED_GAIN`] stations' worth more of the step than the predicted one.
-/// Looked at for every face whose corner is in view, fitted or not: the fit turns
-/// the faces together, so a face of another angle is placed where it crosses its
-/// partner's prediction. Only when the predicted face leaves room for that gain,
-/// which a face shown along its length does not.
+/// it shows more of the step than the predicted one. Looked at for every face whose
+/// corner is in view, fitted or not: the fit turns the faces together, so a face of
+/// another angle is placed where it crosses its partner's prediction. Only when the
+/// predicted face leaves [`TURNED_ROOM`] for more, which a face shown along its length
+/// does not.
 fn turned_face(
     frame: &GrayImage,
     line: &Line,
@@ -744,7 +745,7 @@ fn turned_face(
     predicted: &Profile,
 ) -> bool {
     let before = shown(predicted);
-    if before + TURNED_GAIN > STATIONS as f64 {
+    if before + TURNED_ROOM > STATIONS as f64 {
         return false;
     }
     let len = norm(sub(b, a));
@@ -789,8 +790,7 @@ fn turned_face(
     if slope.atan().abs() < FACE_TURN_DEG.to_radians() || median(&misfit, n) > FACE_LINE_PX {
         return false;
     }
-    // That line must show the face: two stations' worth more of the step than the
-    // predicted one.
+    // That line must show the face: more of the step than the predicted one.
     let n0 = line.normal;
     let (fa, fb) = (line.foot(a), line.foot(b));
     let a1 = add(fa, scale(n0, intercept));
@@ -806,7 +806,7 @@ fn turned_face(
     }
     let turned = Line::through(a1, normal);
     let q = profile(frame, &turned, (a1, b1), partner, s, predicted.step);
-    q.stations == STATIONS && shown(&q) >= before + TURNED_GAIN
+    q.stations == STATIONS && shown(&q) > before
 }
 
 /// Stations over a face's end, as a share of its predicted length either side of
