@@ -21,6 +21,14 @@ fn calibrate(dir: &Path, extra: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Asserts that a results row (from [`replay_reference`]) detects the probe at 0 deg
+/// to within 0.01 deg: the reference frame reads zero.
+fn assert_reads_zero(row: &[String]) {
+    assert_eq!(row[1], "1", "{row:?}");
+    let angle: f64 = row[2].parse().unwrap();
+    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+}
+
 /// Replays `reference` alone with a probe.toml of `config` text (in `dir`); the
 /// results row's fields.
 fn replay_reference(dir: &Path, config: &str, reference: &Path) -> Vec<String> {
@@ -79,12 +87,10 @@ fn printed_block_calibrates_and_the_reference_reads_zero() {
         &format!("[cantilever]\nlength_um = 434.675\nspring_constant_n_per_m = 0.06\n\n{block}"),
         &dir.path().join("reference.png"),
     );
-    assert_eq!(row[1], "1");
-    let angle: f64 = row[2].parse().unwrap();
     // Calibration refines each edge on its own; tracking fits them jointly, with the
     // beam's bend held near what the elastica predicts. The two agree to well under the
     // tracker's own error on a sample frame (a few hundredths of a degree).
-    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    assert_reads_zero(&row);
 }
 
 #[test]
@@ -318,9 +324,7 @@ fn a_rigid_probe_is_calibrated_from_its_named_edges() {
     // The block is a probe's calibration: the reference reads zero, and without a
     // cantilever there is no force.
     let row = replay_reference(dir.path(), &block, &image);
-    assert_eq!(row[1], "1", "{row:?}");
-    let angle: f64 = row[2].parse().unwrap();
-    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    assert_reads_zero(&row);
     assert_eq!(row[3], "", "no cantilever, no force: {row:?}");
     // An apex edge that is not among the named ones is named in the error.
     let err = refused(&["--apex-edges", "upper,tip"]);
@@ -376,9 +380,7 @@ fn a_rigid_probe_is_calibrated_from_one_pixel_near_its_tip_point() {
     assert!(image::open(&overlay).is_ok(), "overlay written");
     // The block is the probe's calibration: the reference reads zero.
     let row = replay_reference(dir.path(), &block, &image);
-    assert_eq!(row[1], "1", "{row:?}");
-    let angle: f64 = row[2].parse().unwrap();
-    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    assert_reads_zero(&row);
     // A pixel in the background far from the needle finds no probe, and says so.
     let out = calibrate(&["--auto", "--rigid", "--apex", "20,20"]);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -399,9 +401,7 @@ fn a_rigid_probe_is_calibrated_from_one_pixel_near_its_tip_point() {
     );
     let block = String::from_utf8(out.stdout).unwrap();
     let row = replay_reference(dir.path(), &block, &image);
-    assert_eq!(row[1], "1", "{row:?}");
-    let angle: f64 = row[2].parse().unwrap();
-    assert!(angle.abs() < 0.01, "the reference frame reads {angle} deg");
+    assert_reads_zero(&row);
     // A frame without a body entering from a side has no tip point to take.
     let blank = dir.path().join("blank.png");
     image::GrayImage::from_pixel(320, 240, image::Luma([90]))

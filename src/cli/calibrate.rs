@@ -40,8 +40,8 @@ apex and [tracker.calibration.edges]; the overlay draws each edge in the colour 
 block names. With --auto --rigid --apex X,Y (a pixel on or near its tip point), \
 calibrate follows the probe's outline from there, edge after edge, until it leaves the \
 frame; the edges are named e1, e2, ... in their order around the outline (rename them \
-in the block). Without --apex, the tip point is the point of the largest body entering \
-from a frame side (either polarity) that reaches farthest into the frame along its \
+in the block). Without --apex, the tip point is a corner of the end that a body \
+entering from a frame side (either polarity) reaches into the frame with, along its \
 axis; give --apex for another corner. It refuses an outline without an edge away from \
 the tip point, or whose edges do not verify as one probe on the reference.",
     after_help = "Example:\n  nanoforce calibrate --image reference.png \\\n      \
@@ -75,7 +75,7 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "X,Y", requires = "auto", value_parser = parse_point)]
     pub apex: Option<[f64; 2]>,
     /// With --auto: a rigid probe of straight edges, found around its outline from
-    /// --apex, or from the point of the body entering the frame that reaches farthest.
+    /// --apex, or from a corner of the end of the body entering the frame.
     #[arg(long, requires = "auto")]
     pub rigid: bool,
     /// A rigid probe's named edge and two or more pixels on it, as "NAME=X,Y X,Y ..."

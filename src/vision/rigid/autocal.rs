@@ -85,10 +85,10 @@ pub struct RigidAutoClicks {
 /// template: one with an edge away from the apex, whose own reference verifies as
 /// this probe where calibration placed it (one body, every edge stepping as found).
 ///
-/// Without a pixel, the tip point is looked for where the probe is the largest body
-/// entering from a frame side (of either polarity): its point farthest along its axis
-/// from that side, the end a needle or a jaw reaches into the view with
-/// ([`find_tip_points`]). The first whose outline makes a template is taken.
+/// Without a pixel, the tip point is looked for where the probe is a body entering
+/// from a frame side (of either polarity): a corner of the end it reaches into the
+/// view with, along its axis ([`find_tip_points`]). The first whose outline makes a
+/// template is taken.
 pub fn auto_calibrate(
     reference: &GrayImage,
     apex: Option<[f64; 2]>,
@@ -120,8 +120,21 @@ pub fn find_tip_points(reference: &GrayImage) -> Result<Vec<[f64; 2]>, AutoCalEr
     let mut why = String::new();
     for (img, bright) in [(reference, true), (&dark, false)] {
         for level in body_levels(img).into_iter().rev() {
+            // The level in the reference's grey levels (the dark pass reads the
+            // inverted frame).
+            let (side, grey) = if bright {
+                ("above", level)
+            } else {
+                ("below", 255 - level)
+            };
             let bodies = match entering_bodies(img, level, BODIES) {
                 Ok(bodies) => bodies,
+                Err(_) if !bright => {
+                    why = format!(
+                        "no dark body of a probe's size below grey level {grey} touches a side"
+                    );
+                    continue;
+                }
                 Err(e) => {
                     why = e;
                     continue;
@@ -154,11 +167,6 @@ pub fn find_tip_points(reference: &GrayImage) -> Result<Vec<[f64; 2]>, AutoCalEr
                 match tip {
                     // A body that reaches the border along its axis shows no tip.
                     Some(t) if near_border(reference, add(t, axis)) => {
-                        let (side, grey) = if bright {
-                            ("above", level)
-                        } else {
-                            ("below", 255 - level)
-                        };
                         why = format!(
                             "the bodies entering from a side {side} grey level {grey} run \
                              on to the border (at ({:.0}, {:.0}))",
