@@ -213,10 +213,13 @@ pub mod rendered {
     use super::Truth;
     use image::GrayImage;
     use nanoforce::config::{CalibrationConfig, TrackerConfig};
-    use nanoforce::scene::{render, render_into, render_over_into, FrameSpec, Segment, Session};
-    use nanoforce::vision::{Calibration, Estimate, Tracker};
+    use nanoforce::scene::{
+        render, render_into, render_over_into, FrameSpec, Segment, Session, MAGNIFICATIONS,
+    };
+    use nanoforce::vision::{Calibration, Estimate, ScaleRange, Tracker};
 
-    /// The tracker settings and calibration clicks the session's probe.toml would hold.
+    /// The tracker settings and calibration clicks the session's probe.toml would hold:
+    /// the scales the SEM gives over the reference's (`scale_range`), and the clicks.
     /// The scene's click generator can put red clicks beyond the frame when the beam
     /// leaves it steeply; a person cannot click there, so such clicks are dropped, and
     /// if fewer than two remain, the person clicks (to within +-0.5 px) at a quarter,
@@ -260,9 +263,17 @@ pub mod rendered {
                 })
                 .collect()
         };
+        // The lab knows its SEM's magnifications: the frames' scale over the reference's
+        // lies within them, stated with 10 % to spare.
+        let mags = (MAGNIFICATIONS[0], MAGNIFICATIONS[MAGNIFICATIONS.len() - 1]);
+        let reference_mag = session.reference.magnification;
         TrackerConfig {
             threshold: session.threshold,
             window_deg: session.window_deg,
+            scale_range: Some(ScaleRange::new(
+                mags.0 / reference_mag / 1.1,
+                mags.1 / reference_mag * 1.1,
+            )),
             calibration: Some(CalibrationConfig::pyramid(
                 "reference.png".into(),
                 fix(clicks.red, edges.red, 1),
