@@ -398,6 +398,9 @@ pub fn check_edges(
     let mut shown_step = [1.0; 3];
     // The far end of each edge's station span.
     let mut far_end = [None; 3];
+    // An unfitted beam edge whose slack reaches out of the frame, not found on the
+    // shifts in view: refused if a face's base pins the scale (below).
+    let mut red_unseen = None;
     for e in [RED, BLUE, GREEN] {
         let Some((a, b, corner)) = station_span(t, pose, e, size, &s) else {
             continue;
@@ -427,13 +430,20 @@ pub fn check_edges(
                 inside(shifted(a, k)) && inside(shifted(b, k))
             });
             let mut found = line;
+            let mut best_in_view: Option<Profile> = None;
             for k in -slack..=slack {
                 let moved = Line {
                     rho: line.rho + k as f64,
                     ..line
                 };
                 let q = profile(frame, &moved, (a, b), None, &s, calibrated[e]);
-                if q.stations == STATIONS && q.step_ratio() > p.step_ratio() {
+                if q.stations < STATIONS {
+                    continue;
+                }
+                if best_in_view.is_none_or(|b| q.step_ratio() > b.step_ratio()) {
+                    best_in_view = Some(q);
+                }
+                if q.step_ratio() > p.step_ratio() {
                     p = q;
                     found = moved;
                 }
@@ -448,7 +458,12 @@ pub fn check_edges(
                 (true, Some(miss)) => return Some(miss),
                 // Found with the whole slack in view: the beam edge is there.
                 (true, None) => beam_edge = Some(found),
-                (false, _) => {}
+                (false, _) => {
+                    red_unseen = best_in_view.and_then(|mut q| {
+                        q.corner_in_view = false;
+                        q.refusal(Edge::Red)
+                    });
+                }
             }
             continue;
         }
@@ -485,6 +500,18 @@ pub fn check_edges(
     }
     if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, &shown_step) {
         return Some(miss);
+    }
+    // A face ending at its base, measured over its whole end (in view), pins the
+    // scale and with it the beam edge's depth: the beam edge must then show on the
+    // part of its slack in view.
+    if let Some(miss) = red_unseen {
+        let pinned = [BLUE, GREEN].iter().any(|&e| {
+            face_end(frame, t, pose, e, &s, calibrated[e], shown_step[e])
+                .is_some_and(|f| (f - 1.0).abs() <= END_SLACK)
+        });
+        if pinned {
+            return Some(miss);
+        }
     }
     // A face the pose places to leave the frame must run to the border.
     for e in [BLUE, GREEN] {
@@ -1265,6 +1292,47 @@ mod tests {
         // No beam: no line anywhere the beam edge could lie.
         let bare = probe_frame(&t, &truth, 190.0, false);
         assert_eq!(beam_edge_scale(&bare, &t, &truth, 1.0, 150.0), None);
+    }
+
+    #[test]
+    fn a_face_ending_at_its_base_demands_the_beam_edge_in_view() {
+        // The toy pyramid's faces meeting the beam's lower face at their bases (50
+        // reference pixels from the apex, 60 deg from the beam). The beam edge slants
+        // across the top border, so its slack reaches out of the frame; the front
+        // face's base and the stretch past it are in view.
+        let t = Template {
+            beam_px: Some(50.0 - 50.0 * 60f64.to_radians().sin()),
+            ..super::super::template::toy()
+        };
+        let pose = Pose {
+            psi: 0.45,
+            scale: 2.0,
+            apex: [280.0, 115.0],
+        };
+        let lines = [RED, BLUE, GREEN].map(|e| t.line(&pose, e));
+        let thick = t.beam_px.unwrap() * pose.scale;
+        // The pyramid up to the beam's lower face, and the beam if `beam`; or a
+        // pyramid running on to the beam edge's line with no beam.
+        let frame = |beam: bool, running_on: bool| {
+            GrayImage::from_fn(400, 300, |x, y| {
+                let p = [f64::from(x), f64::from(y)];
+                let depth = lines[RED].depth(p);
+                let faces = lines[BLUE].depth(p) >= 0.0 && lines[GREEN].depth(p) >= 0.0;
+                let pyramid = faces && depth >= if running_on { 0.0 } else { thick };
+                let in_beam = beam && (0.0..=thick).contains(&depth);
+                image::Luma([if pyramid || in_beam { 200 } else { 50 }])
+            })
+        };
+        let check =
+            |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [false, true, true]);
+        assert_eq!(check(&frame(true, false)), None);
+        assert_eq!(
+            check(&frame(false, false)),
+            Some(Miss::EdgeMissing(Edge::Red.into()))
+        );
+        // Faces running on past their bases do not pin the scale: a beam edge beyond
+        // the border is allowed.
+        assert_eq!(check(&frame(false, true)), None);
     }
 
     #[test]
