@@ -440,7 +440,7 @@ pub fn check_edges(
                 if q.stations < STATIONS {
                     continue;
                 }
-                if best_in_view.is_none_or(|b| q.step_ratio() > b.step_ratio()) {
+                if best_in_view.is_none_or(|best| q.step_ratio() > best.step_ratio()) {
                     best_in_view = Some(q);
                 }
                 if q.step_ratio() > p.step_ratio() {
