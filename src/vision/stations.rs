@@ -498,18 +498,15 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red.into()));
     }
-    if let Some(miss) = face_ends(frame, t, pose, &s, calibrated, &shown_step) {
+    // Where each face's step ends, measured over its whole end in view.
+    let ends = [BLUE, GREEN].map(|e| face_end(frame, t, pose, e, &s, calibrated[e], shown_step[e]));
+    if let Some(miss) = face_ends(ends) {
         return Some(miss);
     }
-    // A face ending at its base, measured over its whole end (in view), pins the
-    // scale and with it the beam edge's depth: the beam edge must then show on the
-    // part of its slack in view.
+    // A face ending at its base pins the scale and with it the beam edge's depth: the
+    // beam edge must then show on the part of its slack in view.
     if let Some(miss) = red_unseen {
-        let pinned = [BLUE, GREEN].iter().any(|&e| {
-            face_end(frame, t, pose, e, &s, calibrated[e], shown_step[e])
-                .is_some_and(|f| (f - 1.0).abs() <= END_SLACK)
-        });
-        if pinned {
+        if ends.iter().flatten().any(|f| (f - 1.0).abs() <= END_SLACK) {
             return Some(miss);
         }
     }
@@ -967,23 +964,14 @@ fn runs_out(
 }
 
 /// Both faces, where the pose places them and their ends are measured (whether or not
-/// the fit kept them), ending more than [`END_SLACK`] of their length before or
-/// beyond the bases the scale predicts: the pyramid is not this probe's size at this
-/// scale. The scale comes from the beam edge's distance to the apex, so a beam of
-/// another thickness moves it while the pyramid keeps its size. One face alone can
-/// end early or late where a particle or a bright substrate lies at its base; the
-/// scale moves both.
-fn face_ends(
-    frame: &GrayImage,
-    t: &Template,
-    pose: &Pose,
-    s: &Sampling,
-    calibrated: &[f64; 3],
-    shown_step: &[f64; 3],
-) -> Option<Miss> {
-    let end =
-        |e: usize| face_end(frame, t, pose, e, s, calibrated[e], shown_step[e]).map(|f| f - 1.0);
-    let (b, g) = (end(BLUE)?, end(GREEN)?);
+/// the fit kept them; `ends` as [`face_end`] gives them, back face first), ending more
+/// than [`END_SLACK`] of their length before or beyond the bases the scale predicts:
+/// the pyramid is not this probe's size at this scale. The scale comes from the beam
+/// edge's distance to the apex, so a beam of another thickness moves it while the
+/// pyramid keeps its size. One face alone can end early or late where a particle or a
+/// bright substrate lies at its base; the scale moves both.
+fn face_ends([back, front]: [Option<f64>; 2]) -> Option<Miss> {
+    let (b, g) = (back? - 1.0, front? - 1.0);
     (b * g > 0.0 && b.abs().min(g.abs()) > END_SLACK).then_some(Miss::ScaleMismatch)
 }
 
