@@ -10,9 +10,9 @@
 //! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
 //!   jaw), each frame searched whole, over eight frames of its tool suite;
 //! - `realbg/faded-faces`: the 50 frames of a real-background session whose faces
-//!   fade into a bright textured ground under noise 30-48 (`scene::real_suite` seed
-//!   13, session 10), per frame: the frames where the scale is found from the beam
-//!   edge itself.
+//!   fade into a bright textured ground under noise 30-48
+//!   (`scene::real_suite(13, 12, 50, crops)[10]`), per frame: the frames where the
+//!   scale is found from the beam edge itself.
 //!
 //! `cargo bench --bench tracker`; docs/tracker.md records the numbers.
 use std::path::Path;

@@ -175,10 +175,10 @@ fn blank_frames_are_never_detected() {
 
 #[test]
 fn a_line_beside_a_face_does_not_take_its_place() {
-    // Suite 12, session 8, frame 47 (harsh, 2696x, 1280x960): a scratch runs beside the
-    // front face, 8 px outside it, and on past the apex. On the binned edge map it is the
-    // longer line, so the search's best tip takes it for the face and puts the apex where
-    // it crosses the side face's extension, 24 px too low: 0.74 deg off, at confidence
+    // A harsh frame at 2696x, 1280x960: a scratch runs beside the front face, 8 px
+    // outside it, and on past the apex. On the binned edge map it is the longer line,
+    // so the search's best tip takes it for the face and puts the apex where it
+    // crosses the side face's extension, 24 px too low: 0.74 deg off, at confidence
     // 0.54 (the scratch has a third of the face's contrast). The runner-up on the face
     // itself verifies at 0.84 and must win.
     let session = &scene::suite(12, 12, 50)[8];
@@ -201,13 +201,12 @@ fn a_line_beside_a_face_does_not_take_its_place() {
 
 #[test]
 fn a_substrate_beside_part_of_a_face_does_not_lean_it() {
-    // Suite 31, session 1, frame 38 (harsh, 1578x): the apex dips into the substrate,
-    // whose edge crosses both faces a few dozen pixels up, so each face has the bright
-    // substrate outside one part and the dark background outside the rest. A single
-    // outside level (with a slope) along the face cannot follow that step, and its
-    // misfit leans the tip: 0.046 deg off with the noise turned off (0.011 without the
-    // substrate), 0.265 deg with it on. Each stretch of a band has its own outside
-    // level, which this checks.
+    // A harsh frame at 1578x: the apex dips into the substrate, whose edge crosses both
+    // faces a few dozen pixels up, so each face has the bright substrate outside one
+    // part and the dark background outside the rest. A single outside level (with a
+    // slope) along the face cannot follow that step, and its misfit leans the tip:
+    // 0.046 deg off with the noise turned off (0.011 without the substrate), 0.265 deg
+    // with it on. Each stretch of a band has its own outside level, which this checks.
     let session = &scene::suite(31, 12, 50)[1];
     let mut tracker = rendered::tracker(session, false);
     let mut spec = session.frames[38];
