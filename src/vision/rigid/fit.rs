@@ -77,8 +77,9 @@ const HUBER_K: f64 = 1.5;
 /// suites, tests/rigid_probes.rs).
 const SIGMA_FACTOR: f64 = 1.2;
 /// Apex stations: of the stations nearest the apex on each apex edge, all but one must
-/// hold (a tip hidden under a particle holds none; noise can drop one), and the nearest
-/// must step as the edge does within [`NEAREST_PX`] of it: its run reaches into the
+/// show it (a tip hidden under a particle at the probe's level shows none; noise can
+/// drop one; a tip touching a brighter particle shows its outline stepping the other
+/// way), and the nearest must show it within [`NEAREST_PX`] of it: its run reaches into the
 /// corner's blur, which moves the located step by up to 2 px on a faint edge, while a
 /// body that only looks like the probe (a dark segment of a rail for a dark lever's
 /// end) shows no step there.
@@ -475,7 +476,7 @@ impl Fitter {
                 // the reference steps by less; a larger step is no sign of another
                 // body either, as the level outside the probe changes as it moves.
                 refusal = Some(Miss::WrongAppearance(edge.name));
-            } else if is_apex_edge && !self.apex_held(t, &pose, e) {
+            } else if is_apex_edge && !self.apex_held(frame, t, &pose, e) {
                 refusal = Some(Miss::EdgeMissing(edge.name));
             } else if self.runs_on(t, &pose, e) {
                 refusal = Some(Miss::ScaleMismatch);
@@ -520,27 +521,66 @@ impl Fitter {
     }
 
     /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
-    /// hold it, and the nearest steps as it does within [`NEAREST_PX`].
-    fn apex_held(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+    /// show it, and the nearest shows it within [`NEAREST_PX`] ([`Fitter::shows`]).
+    fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
         let edge = &t.edges[e];
         // Stations run from extent[0] to extent[1]; the apex end is the one nearer
         // tau = 0.
         let from_low = edge.extent[0].abs() <= edge.extent[1].abs();
-        let stations = self.points.iter().filter(|p| p.edge == e);
-        let count = stations.clone().count();
+        let count = self.points.iter().filter(|p| p.edge == e).count();
         let nearest = APEX_STATIONS.min(count);
-        let mut held = [false; APEX_STATIONS];
-        let mut steps = false;
         let skip = if from_low { 0 } else { count - nearest };
-        for (k, p) in stations.skip(skip).take(nearest).enumerate() {
-            // Counted from the apex.
-            let slot = if from_low { k } else { nearest - 1 - k };
-            held[slot] = Self::holds_final(t, pose, p);
-            if slot == 0 {
-                steps = Self::steps_within(t, pose, p, NEAREST_PX);
-            }
+        // Counted from the apex.
+        let mut stations = [None; APEX_STATIONS];
+        for (k, p) in self
+            .points
+            .iter()
+            .filter(|p| p.edge == e)
+            .skip(skip)
+            .take(nearest)
+            .enumerate()
+        {
+            stations[if from_low { k } else { nearest - 1 - k }] = Some(*p);
         }
-        steps && held[..nearest].iter().filter(|h| **h).count() + 1 >= nearest
+        let mut shown = 0;
+        for (slot, p) in stations.iter().enumerate() {
+            let Some(p) = p else { continue };
+            if slot == 0 && !self.shows(frame, t, pose, p, NEAREST_PX) {
+                return false;
+            }
+            shown += usize::from(self.shows(frame, t, pose, p, HELD_PX));
+        }
+        shown + 1 >= nearest
+    }
+
+    /// Station `p` shows its edge within `px` of the line: it steps as the edge does,
+    /// or, against a neighbour brighter than the probe where the probe is the brighter
+    /// (or darker where it is darker), the other way by as much: the tip's outline
+    /// where it touches a particle.
+    fn shows(
+        &mut self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: &Pose,
+        p: &Point,
+        px: f64,
+    ) -> bool {
+        if Self::steps_within(t, pose, p, px) {
+            return true;
+        }
+        if !p.in_view {
+            return false;
+        }
+        let edge = &t.edges[p.edge];
+        let normal = rotate(edge.normal, pose.psi);
+        let q = pose.place(edge, p.tau);
+        let reach = REACHES[REACHES.len() - 1];
+        self.stations
+            .locate(frame, q, normal, -edge.polarity, reach)
+            .is_some_and(|f| {
+                let outline = Point::located(p.edge, p.tau, q, normal, f, edge.step);
+                Self::steps_within(t, pose, &outline, px)
+            })
     }
 
     /// Every station past a closed end of edge `e` holds it.

@@ -526,6 +526,37 @@ mod tests {
         assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
     }
 
+    /// A needle whose tip touches a particle drawn under it (8 px across, beside the
+    /// upper flank's first 13 px from the apex): a particle brighter than the needle (250 against 180) leaves
+    /// the tip's outline stepping the other way, and the needle is detected; a particle
+    /// at the needle's level hides the tip, and the frame is refused for that flank.
+    #[test]
+    fn a_tip_touching_a_brighter_particle_shows_its_outline() {
+        let apex = [250.0, 100.0];
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let touched = |level: u8| {
+            let mut frame = needle(0.0, apex, 4.0, 2);
+            for (x, y, p) in frame.enumerate_pixels_mut() {
+                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+                if p[0] < 120 && (dx + 8.0).hypot(dy + 5.0) <= 8.0 {
+                    p[0] = level;
+                }
+            }
+            frame
+        };
+        let e = tracker.track(&touched(250));
+        assert!(e.detected, "{e:?}");
+        assert!((e.angle_deg.unwrap()).abs() < 0.05, "{e:?}");
+        let e = tracker.track(&touched(180));
+        assert_eq!(
+            e.miss,
+            Some(Miss::EdgeMissing(EdgeName::intern("upper"))),
+            "{e:?}"
+        );
+    }
+
     /// A needle whose half below its axis is 80 levels darker than its upper half
     /// (against a calibrated step of 120): each flank still steps as the needle's, but
     /// the two are not one body, and the frame is refused as `wrong-appearance`.
