@@ -79,10 +79,10 @@ const SIGMA_FACTOR: f64 = 1.2;
 /// Apex stations: of the stations nearest the apex on each apex edge, all but one must
 /// show it (a tip hidden under a particle at the probe's level shows none; noise can
 /// drop one; a tip touching a brighter particle shows its outline stepping the other
-/// way), and the nearest must show it within [`NEAREST_PX`] of it: its run reaches into the
-/// corner's blur, which moves the located step by up to 2 px on a faint edge, while a
-/// body that only looks like the probe (a dark segment of a rail for a dark lever's
-/// end) shows no step there.
+/// way), and the nearest must show it within [`NEAREST_PX`] of it: its run reaches
+/// into the corner's blur, which moves the located step by up to 2 px on a faint
+/// edge, while a body that only looks like the probe (a dark segment of a rail for a
+/// dark lever's end) shows no step there.
 const APEX_STATIONS: usize = 3;
 const NEAREST_PX: f64 = 3.0;
 

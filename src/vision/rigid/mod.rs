@@ -429,6 +429,13 @@ mod tests {
         })
     }
 
+    /// A tracker (window 20 deg) calibrated on a reference of [`needle`] at `apex`.
+    fn needle_tracker(apex: [f64; 2]) -> RigidTracker {
+        let reference = needle(0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        RigidTracker::new(template, 20.0)
+    }
+
     /// A reference whose lower flank forks 20 px beyond its clicks: a body at the
     /// probe's level below it, bounded by a line turned 10 deg from the flank, carries
     /// the step away from the flank for 75 px. The trace keeps to the flank, whose
@@ -508,9 +515,7 @@ mod tests {
     #[test]
     fn a_flank_running_on_past_its_corner_is_refused() {
         let apex = [250.0, 100.0];
-        let reference = needle(0.0, apex, 2.0, 1);
-        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
-        let mut tracker = RigidTracker::new(template, 20.0);
+        let mut tracker = needle_tracker(apex);
         let mut frame = needle(0.0, apex, 4.0, 2);
         assert!(tracker.track(&frame).detected);
         for y in 80..125u32 {
@@ -527,15 +532,14 @@ mod tests {
     }
 
     /// A needle whose tip touches a particle drawn under it (8 px across, beside the
-    /// upper flank's first 13 px from the apex): a particle brighter than the needle (250 against 180) leaves
-    /// the tip's outline stepping the other way, and the needle is detected; a particle
-    /// at the needle's level hides the tip, and the frame is refused for that flank.
+    /// upper flank's first 13 px from the apex): a particle brighter than the needle
+    /// (250 against 180) leaves the tip's outline stepping the other way, and the
+    /// needle is detected; a particle at the needle's level hides the tip, and the
+    /// frame is refused for that flank.
     #[test]
     fn a_tip_touching_a_brighter_particle_shows_its_outline() {
         let apex = [250.0, 100.0];
-        let reference = needle(0.0, apex, 2.0, 1);
-        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
-        let mut tracker = RigidTracker::new(template, 20.0);
+        let mut tracker = needle_tracker(apex);
         let touched = |level: u8| {
             let mut frame = needle(0.0, apex, 4.0, 2);
             for (x, y, p) in frame.enumerate_pixels_mut() {
@@ -563,9 +567,7 @@ mod tests {
     #[test]
     fn flanks_of_two_bodies_are_not_one_probe() {
         let apex = [250.0, 100.0];
-        let reference = needle(0.0, apex, 2.0, 1);
-        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
-        let mut tracker = RigidTracker::new(template, 20.0);
+        let mut tracker = needle_tracker(apex);
         let mut frame = needle(0.0, apex, 2.0, 2);
         assert!(tracker.track(&frame).detected);
         for (x, y, p) in frame.enumerate_pixels_mut() {
