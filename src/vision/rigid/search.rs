@@ -11,8 +11,8 @@
 //! gives the scale. The best placements, scored by their summed votes, go on to the
 //! fit and the verification.
 
-use super::{Bounds, Pose, RigidTemplate};
-use crate::vision::geometry::{clip_to_rect, truncate_index, Line};
+use super::{Bounds, Pose, RigidEdge, RigidTemplate};
+use crate::vision::geometry::{add, clip_to_rect, rotate, scale, sub, truncate_index, Line};
 use crate::vision::pyramid::Pyramid;
 use crate::vision::ScaleRange;
 
@@ -40,6 +40,12 @@ pub const MAX_PLACEMENTS: usize = 6;
 /// Placements this close in rotation (bins) and apex (detection pixels) are one.
 const SAME_PSI_BINS: f64 = 2.5;
 const SAME_APEX_PX: f64 = 4.0;
+/// A run's end is a candidate apex when the run spans this many detection pixels (a
+/// pixel or two of support is the noise's).
+const MIN_RUN_PX: f64 = 2.0;
+/// The second apex edge is looked for over at least this many detection pixels from
+/// a candidate apex.
+const MIN_END_FACE_PX: f64 = 3.0;
 /// An edge gives the scale when it lies at least this far from the apex, reference
 /// pixels.
 const MIN_SCALE_OFFSET_PX: f64 = 2.0;
@@ -213,6 +219,12 @@ impl Search {
                 -1.0
             };
             let direction = self.directions[0] + psi;
+            let end_face = EndFace::of(
+                &template.edges[voting[1]],
+                psi,
+                scales.lo / factor,
+                self.directions[1] + psi,
+            );
             for &(ra, va) in a.iter().flatten() {
                 // The apex where the first apex edge's support ends, and where each of
                 // the second's lines crosses it.
@@ -223,6 +235,7 @@ impl Search {
                     direction,
                     toward,
                     self.threshold,
+                    &end_face,
                 );
                 let crossings = b
                     .iter()
@@ -278,9 +291,14 @@ impl Search {
     }
 }
 
-/// The far end of the longest run of pixels supporting `line` (detection pixels from
-/// `centre`) with gradients along `direction`, at the end `toward` points to along
-/// it (+1: along `along(normal)`), from `centre`.
+/// Where the apex lies along `line` (detection pixels from `centre`), the first apex
+/// edge's line with gradients along `direction`: at an end of a run of pixels
+/// supporting it, the end `toward` points to along it (+1: along `along(normal)`).
+/// Of the runs' ends, the one where `end_face` (the second apex edge) shows best, if
+/// it shows along at least half its length there and better than at the longest
+/// run's end; else the longest run's. A faint flank over a textured background is
+/// broken into runs, and its longest may end at a band of the background rather than
+/// at the tip.
 fn run_end(
     pyr: &Pyramid,
     line: &Line,
@@ -288,47 +306,149 @@ fn run_end(
     direction: f64,
     toward: f64,
     threshold: f32,
+    end_face: &EndFace,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
     let t = [n[1], -n[0]];
     let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
     let (w, h) = (pyr.width as f64, pyr.height as f64);
     let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
-    let (c, s) = (direction.cos() as f32, direction.sin() as f32);
-    let min_dot = (RUN_ANGLE_RAD.cos() as f32) * threshold;
+    let supports = Support::new(direction, threshold);
     let supported = |u: f64| {
-        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH).any(|k| {
-            let x = (foot[0] + t[0] * u + n[0] * f64::from(k)).round() as usize;
-            let y = (foot[1] + t[1] * u + n[1] * f64::from(k)).round() as usize;
-            let i = y * pyr.width + x;
-            pyr.mag[i] >= threshold
-                && pyr.gx[i] * c + pyr.gy[i] * s >= min_dot * pyr.mag[i] / threshold
-        })
+        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
+            .any(|k| supports.at(pyr, add(add(foot, scale(t, u)), scale(n, f64::from(k)))))
     };
-    let (mut best, mut start, mut gap) = ((0.0, 0.0, 0.0), None, 0);
+    // Detection pixels of the point `u` along the line.
+    let point = |u: f64| add(foot, scale(t, u));
+    let face_at = |u: f64| end_face.support(pyr, point(u), threshold);
+    // The longest run (length, from, to), and the best run end by the end face's
+    // support (support, position).
+    let mut longest = (0.0, 0.0, 0.0);
+    let mut best_end: Option<(usize, f64)> = None;
+    let mut close = |from: f64, to: f64| {
+        if to - from < MIN_RUN_PX {
+            return;
+        }
+        let end = if toward > 0.0 { to } else { from };
+        let support = face_at(end);
+        if best_end.is_none_or(|(s, _)| support > s) {
+            best_end = Some((support, end));
+        }
+    };
+    let (mut start, mut last, mut gap) = (None, 0.0, 0);
     let mut u = u0.ceil();
     while u <= u1 {
         if supported(u) {
             let from = *start.get_or_insert(u);
             gap = 0;
-            if u - from > best.0 {
-                best = (u - from, from, u);
+            last = u;
+            if u - from > longest.0 {
+                longest = (u - from, from, u);
             }
-        } else if start.is_some() {
+        } else if let Some(from) = start {
             gap += 1;
             if gap > RUN_GAP {
+                close(from, last);
                 start = None;
             }
         }
         u += 1.0;
     }
-    (best.0 > 0.0).then(|| {
-        let end = if toward > 0.0 { best.2 } else { best.1 };
-        [
-            foot[0] + t[0] * end - centre[0],
-            foot[1] + t[1] * end - centre[1],
-        ]
-    })
+    if let Some(from) = start {
+        close(from, last);
+    }
+    if longest.0 <= 0.0 {
+        return None;
+    }
+    let longest_end = if toward > 0.0 { longest.2 } else { longest.1 };
+    let end = match best_end {
+        Some((support, end))
+            if support > face_at(longest_end) && 2 * support >= end_face.pixels() =>
+        {
+            end
+        }
+        _ => longest_end,
+    };
+    Some(sub(point(end), centre))
+}
+
+/// A detection pixel supports an edge when its gradient is strong and within
+/// [`RUN_ANGLE_RAD`] of the edge's.
+struct Support {
+    cos: f32,
+    sin: f32,
+    threshold: f32,
+    min_dot: f32,
+}
+
+impl Support {
+    fn new(direction: f64, threshold: f32) -> Support {
+        Support {
+            cos: direction.cos() as f32,
+            sin: direction.sin() as f32,
+            threshold,
+            min_dot: RUN_ANGLE_RAD.cos() as f32 * threshold,
+        }
+    }
+
+    /// Whether the detection pixel nearest `p` supports the edge (false outside).
+    fn at(&self, pyr: &Pyramid, p: [f64; 2]) -> bool {
+        let (x, y) = (p[0].round(), p[1].round());
+        if !(x >= 0.0 && y >= 0.0 && x < pyr.width as f64 && y < pyr.height as f64) {
+            return false;
+        }
+        let i = y as usize * pyr.width + x as usize;
+        pyr.mag[i] >= self.threshold
+            && pyr.gx[i] * self.cos + pyr.gy[i] * self.sin
+                >= self.min_dot * pyr.mag[i] / self.threshold
+    }
+}
+
+/// The second apex edge as a candidate apex would have it: its unit direction from
+/// the apex, its length at the smallest scale searched (detection pixels) and its
+/// gradient's direction.
+struct EndFace {
+    from_apex: [f64; 2],
+    length: f64,
+    direction: f64,
+}
+
+impl EndFace {
+    /// Apex edge `edge` turned by `psi`, at `scale` detection pixels per reference
+    /// pixel, its gradient along `direction`.
+    fn of(edge: &RigidEdge, psi: f64, scale: f64, direction: f64) -> EndFace {
+        let far = if edge.extent[1].abs() >= edge.extent[0].abs() {
+            edge.extent[1]
+        } else {
+            edge.extent[0]
+        };
+        let to_far = edge.point(far);
+        let length = to_far[0].hypot(to_far[1]);
+        EndFace {
+            from_apex: rotate([to_far[0] / length, to_far[1] / length], psi),
+            length: (length * scale).max(MIN_END_FACE_PX),
+            direction,
+        }
+    }
+
+    /// Pixels of its length the face is looked for over, one per detection pixel.
+    fn pixels(&self) -> usize {
+        self.length as usize
+    }
+
+    /// Pixels along the face from `apex` (detection pixels), one per pixel of its
+    /// length, with a pixel within one across it supporting it.
+    fn support(&self, pyr: &Pyramid, apex: [f64; 2], threshold: f32) -> usize {
+        let supports = Support::new(self.direction, threshold);
+        let across = [-self.from_apex[1], self.from_apex[0]];
+        (1..=self.pixels())
+            .filter(|&k| {
+                let on = add(apex, scale(self.from_apex, k as f64));
+                (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
+                    .any(|j| supports.at(pyr, add(on, scale(across, f64::from(j)))))
+            })
+            .count()
+    }
 }
 
 /// Wraps an angle difference (within two turns) to (-pi, pi].
@@ -391,11 +511,55 @@ fn peaks(row: &[f32]) -> [Option<(usize, f32)>; LINES_PER_BIN] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use image::GrayImage;
+
     /// A blunt needle's template, its apex edges named end face first.
     fn end_face_first() -> RigidTemplate {
         let mut t = crate::vision::rigid::needle_template();
         t.edges.swap(0, 1);
         t
+    }
+
+    /// A bright body (200 on 50) below y = 50 from x = 20 to its end face at x = 150,
+    /// its upper flank hidden over x = 100-110 by a band of the body's level above
+    /// it: the flank's support breaks into a long run (to x = 99) and a short one
+    /// (to the end, x = 150). The apex is where the end face shows, at the short
+    /// run's end, not at the long run's.
+    #[test]
+    fn the_apex_is_the_run_end_where_the_end_face_shows() {
+        let frame = GrayImage::from_fn(200, 100, |x, y| {
+            let body = (20..150).contains(&x) && y >= 50;
+            let band = (100..=110).contains(&x) && (30..50).contains(&y);
+            image::Luma([if body || band { 200 } else { 50 }])
+        });
+        let mut pyr = Pyramid::default();
+        pyr.build_binned(&frame, 1);
+        let centre = [100.0, 50.0];
+        // The flank y = 50, the body below it: its normal and gradient point down
+        // (+y), and along it (+x) runs toward the end face.
+        let flank = Line {
+            normal: [0.0, 1.0],
+            rho: 0.0,
+        };
+        let down = std::f64::consts::FRAC_PI_2;
+        let end_face = EndFace {
+            from_apex: [0.0, 1.0],
+            length: 20.0,
+            direction: std::f64::consts::PI,
+        };
+        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
+        let at = [apex[0] + centre[0], apex[1] + centre[1]];
+        assert!(
+            (at[0] - 149.0).abs() <= 1.5 && (at[1] - 50.0).abs() < 1.0,
+            "{at:?}"
+        );
+        // Without the end face there, the longest run's end.
+        let elsewhere = EndFace {
+            from_apex: [0.0, -1.0],
+            ..end_face
+        };
+        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &elsewhere).unwrap();
+        assert!((apex[0] + centre[0] - 99.0).abs() <= 1.5, "{apex:?}");
     }
 
     /// Where the first apex edge's support ends places the apex: the long flank's,
