@@ -517,11 +517,22 @@ impl Fitter {
 
     /// Station `p` steps by [`HOLD_SHARE`] of its edge's step within `px` of the edge.
     fn steps_within(t: &RigidTemplate, pose: &Pose, p: &Point, px: f64) -> bool {
-        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= px
+        Self::step_off(t, pose, p) <= px
+    }
+
+    /// How far from the edge station `p` steps by [`HOLD_SHARE`] of its edge's step,
+    /// pixels (infinity where it does not).
+    fn step_off(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
+        if p.in_view && p.step >= HOLD_SHARE {
+            Self::residual(t, pose, p).abs()
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
-    /// show it, and the nearest shows it within [`NEAREST_PX`] ([`Fitter::shows`]).
+    /// show it within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
+    /// ([`Fitter::shown_off`]).
     fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
         let edge = &t.edges[e];
         // Stations run from extent[0] to extent[1]; the apex end is the one nearer
@@ -545,42 +556,40 @@ impl Fitter {
         let mut shown = 0;
         for (slot, p) in stations.iter().enumerate() {
             let Some(p) = p else { continue };
-            if slot == 0 && !self.shows(frame, t, pose, p, NEAREST_PX) {
+            let off = self.shown_off(frame, t, pose, p);
+            if slot == 0 && off > NEAREST_PX {
                 return false;
             }
-            shown += usize::from(self.shows(frame, t, pose, p, HELD_PX));
+            shown += usize::from(off <= HELD_PX);
         }
         shown + 1 >= nearest
     }
 
-    /// Station `p` shows its edge within `px` of the line: it steps as the edge does,
-    /// or, against a neighbour brighter than the probe where the probe is the brighter
-    /// (or darker where it is darker), the other way by as much: the tip's outline
-    /// where it touches a particle.
-    fn shows(
-        &mut self,
-        frame: &GrayImage,
-        t: &RigidTemplate,
-        pose: &Pose,
-        p: &Point,
-        px: f64,
-    ) -> bool {
-        if Self::steps_within(t, pose, p, px) {
-            return true;
-        }
-        if !p.in_view {
-            return false;
+    /// How far from the line station `p` shows its edge, pixels (infinity where it
+    /// does not): where it steps as the edge does by [`HOLD_SHARE`] of the calibrated
+    /// step, or, beyond [`HELD_PX`], where it steps the other way by as much against a
+    /// neighbour brighter than the probe where the probe is the brighter (darker where
+    /// it is darker): the tip's outline where it touches a particle.
+    fn shown_off(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
+        let own = Self::step_off(t, pose, p);
+        if own <= HELD_PX || !p.in_view {
+            return own;
         }
         let edge = &t.edges[p.edge];
         let normal = rotate(edge.normal, pose.psi);
         let q = pose.place(edge, p.tau);
         let reach = REACHES[REACHES.len() - 1];
-        self.stations
+        let outline = self
+            .stations
             .locate(frame, q, normal, -edge.polarity, reach)
-            .is_some_and(|f| {
-                let outline = Point::located(p.edge, p.tau, q, normal, f, edge.step);
-                Self::steps_within(t, pose, &outline, px)
-            })
+            .map_or(f64::INFINITY, |f| {
+                Self::step_off(
+                    t,
+                    pose,
+                    &Point::located(p.edge, p.tau, q, normal, f, edge.step),
+                )
+            });
+        own.min(outline)
     }
 
     /// Every station past a closed end of edge `e` holds it.
