@@ -223,7 +223,7 @@ impl Search {
                 &template.edges[voting[1]],
                 psi,
                 scales.lo / factor,
-                self.directions[1] + psi,
+                Support::new(self.directions[1] + psi, self.threshold),
             );
             for &(ra, va) in a.iter().flatten() {
                 // The apex where the first apex edge's support ends, and where each of
@@ -313,24 +313,28 @@ fn run_end(
     let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
     let (w, h) = (pyr.width as f64, pyr.height as f64);
     let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
+    // Detection pixels of the point `u` along the line.
+    let point = |u: f64| add(foot, scale(t, u));
     let supports = Support::new(direction, threshold);
     let supported = |u: f64| {
         (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
-            .any(|k| supports.at(pyr, add(add(foot, scale(t, u)), scale(n, f64::from(k)))))
+            .any(|k| supports.at(pyr, add(point(u), scale(n, f64::from(k)))))
     };
-    // Detection pixels of the point `u` along the line.
-    let point = |u: f64| add(foot, scale(t, u));
-    let face_at = |u: f64| end_face.support(pyr, point(u), threshold);
-    // The longest run (length, from, to), and the best run end by the end face's
-    // support (support, position).
+    // The longest run (length, from, to); the best run end by the end face's support
+    // (support, position), and the end face's support at the longest run's end.
     let mut longest = (0.0, 0.0, 0.0);
     let mut best_end: Option<(usize, f64)> = None;
-    let mut close = |from: f64, to: f64| {
+    let mut longest_support = 0;
+    // Closes the run from `from` to `to`, the longest so far if `is_longest`.
+    let mut close = |from: f64, to: f64, is_longest: bool| {
         if to - from < MIN_RUN_PX {
             return;
         }
         let end = if toward > 0.0 { to } else { from };
-        let support = face_at(end);
+        let support = end_face.support(pyr, point(end));
+        if is_longest {
+            longest_support = support;
+        }
         if best_end.is_none_or(|(s, _)| support > s) {
             best_end = Some((support, end));
         }
@@ -348,23 +352,21 @@ fn run_end(
         } else if let Some(from) = start {
             gap += 1;
             if gap > RUN_GAP {
-                close(from, last);
+                close(from, last, longest.1 == from);
                 start = None;
             }
         }
         u += 1.0;
     }
     if let Some(from) = start {
-        close(from, last);
+        close(from, last, longest.1 == from);
     }
     if longest.0 <= 0.0 {
         return None;
     }
     let longest_end = if toward > 0.0 { longest.2 } else { longest.1 };
     let end = match best_end {
-        Some((support, end))
-            if support > face_at(longest_end) && 2 * support >= end_face.pixels() =>
-        {
+        Some((support, end)) if support > longest_support && 2 * support >= end_face.pixels() => {
             end
         }
         _ => longest_end,
@@ -405,18 +407,18 @@ impl Support {
 }
 
 /// The second apex edge as a candidate apex would have it: its unit direction from
-/// the apex, its length at the smallest scale searched (detection pixels) and its
-/// gradient's direction.
+/// the apex, its length at the smallest scale searched (detection pixels) and the
+/// pixels that support it.
 struct EndFace {
     from_apex: [f64; 2],
     length: f64,
-    direction: f64,
+    supports: Support,
 }
 
 impl EndFace {
     /// Apex edge `edge` turned by `psi`, at `scale` detection pixels per reference
-    /// pixel, its gradient along `direction`.
-    fn of(edge: &RigidEdge, psi: f64, scale: f64, direction: f64) -> EndFace {
+    /// pixel, supported as `supports` says.
+    fn of(edge: &RigidEdge, psi: f64, scale: f64, supports: Support) -> EndFace {
         let far = if edge.extent[1].abs() >= edge.extent[0].abs() {
             edge.extent[1]
         } else {
@@ -427,7 +429,7 @@ impl EndFace {
         EndFace {
             from_apex: rotate([to_far[0] / length, to_far[1] / length], psi),
             length: (length * scale).max(MIN_END_FACE_PX),
-            direction,
+            supports,
         }
     }
 
@@ -438,14 +440,13 @@ impl EndFace {
 
     /// Pixels along the face from `apex` (detection pixels), one per pixel of its
     /// length, with a pixel within one across it supporting it.
-    fn support(&self, pyr: &Pyramid, apex: [f64; 2], threshold: f32) -> usize {
-        let supports = Support::new(self.direction, threshold);
+    fn support(&self, pyr: &Pyramid, apex: [f64; 2]) -> usize {
         let across = [-self.from_apex[1], self.from_apex[0]];
         (1..=self.pixels())
             .filter(|&k| {
                 let on = add(apex, scale(self.from_apex, k as f64));
                 (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
-                    .any(|j| supports.at(pyr, add(on, scale(across, f64::from(j)))))
+                    .any(|j| self.supports.at(pyr, add(on, scale(across, f64::from(j)))))
             })
             .count()
     }
@@ -545,7 +546,7 @@ mod tests {
         let end_face = EndFace {
             from_apex: [0.0, 1.0],
             length: 20.0,
-            direction: std::f64::consts::PI,
+            supports: Support::new(std::f64::consts::PI, 10.0),
         };
         let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
         let at = [apex[0] + centre[0], apex[1] + centre[1]];
