@@ -72,6 +72,22 @@ fn quantile(v: &[f64], q: f64) -> f64 {
     s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
+/// The suites' seed: `TOOL_SEED`, or 41.
+fn tool_seed() -> u64 {
+    std::env::var("TOOL_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(41)
+}
+
+/// The template calibrated on `session`'s reference (rendered into `frame`) from its
+/// clicks.
+fn calibrated(session: &ToolSession, crops: &[GrayImage], frame: &mut GrayImage) -> RigidTemplate {
+    render_tool_into(&session.reference, crops, frame);
+    calibrate_rigid(frame, &clicks_of(session), session.apex)
+        .unwrap_or_else(|e| panic!("{} reference: {e}", session.kind.name()))
+}
+
 /// A session's clicks as calibration takes them.
 fn clicks_of(session: &ToolSession) -> Vec<(String, Vec<[f64; 2]>)> {
     session
@@ -85,10 +101,7 @@ fn clicks_of(session: &ToolSession) -> Vec<(String, Vec<[f64; 2]>)> {
 /// `others`' frames (other kinds of tool: none of them is this probe) with the same.
 fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out: &mut Measured) {
     let mut frame = GrayImage::new(1, 1);
-    render_tool_into(&session.reference, crops, &mut frame);
-    let clicks = clicks_of(session);
-    let template = calibrate_rigid(&frame, &clicks, session.apex)
-        .unwrap_or_else(|e| panic!("{} reference: {e}", session.kind.name()));
+    let template = calibrated(session, crops, &mut frame);
     if std::env::var("RIGID_DEBUG").is_ok() {
         let t = &template;
         println!(
@@ -204,10 +217,7 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
 }
 
 fn measure(kind: ToolKind) -> Measured {
-    let seed = std::env::var("TOOL_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(41);
+    let seed = tool_seed();
     let crops = real_crops();
     let mut m = Measured::default();
     let suites: Vec<Vec<ToolSession>> = ToolKind::ALL
@@ -331,6 +341,9 @@ fn a_gripper_jaw_is_tracked_over_its_suite() {
 /// Frames of each kind of the adversarial generator per tool session, and windows of
 /// real SEM frames.
 const DECOY_FRAMES: usize = 10;
+/// Offsets the decoys' frame seeds from the ones tests/tracker_adversarial.rs derives
+/// the same way, so a seed both suites use shows different frames in each.
+const DECOY_STREAM: u64 = 77;
 
 /// Every kind's trackers (its 16 sessions', calibrated on their references) on frames
 /// without the tool: the adversarial generator's kinds (tests/tracker_adversarial.rs),
@@ -342,10 +355,7 @@ const DECOY_FRAMES: usize = 10;
 /// of named edges").
 #[test]
 fn no_tool_is_found_on_frames_without_it() {
-    let seed = std::env::var("TOOL_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(41);
+    let seed = tool_seed();
     let crops = real_crops();
     let afm = scene::suite(seed, 6, 1);
     let mut adversary = Adversary::new();
@@ -358,9 +368,7 @@ fn no_tool_is_found_on_frames_without_it() {
             .iter()
             .enumerate()
         {
-            render_tool_into(&session.reference, &crops, &mut frame);
-            let template = calibrate_rigid(&frame, &clicks_of(session), session.apex).unwrap();
-            let mut tracker = lab_tracker(template);
+            let mut tracker = lab_tracker(calibrated(session, &crops, &mut frame));
             let made_for = &afm[i % afm.len()];
             let mut found = |what: String, e: Estimate, strip: bool| {
                 if !e.detected {
@@ -379,7 +387,10 @@ fn no_tool_is_found_on_frames_without_it() {
             };
             for d in Decoy::ALL {
                 for k in 0..DECOY_FRAMES {
-                    let frame_seed = sub_seed(seed, (1000 * i + 100 * d as usize + k) as u64 + 77);
+                    let frame_seed = sub_seed(
+                        seed,
+                        (1000 * i + 100 * d as usize + k) as u64 + DECOY_STREAM,
+                    );
                     adversary.render_into(made_for, d, frame_seed, &mut decoy);
                     let strip = matches!(d, Decoy::Shapes | Decoy::OtherProbe | Decoy::Occluded);
                     found(
