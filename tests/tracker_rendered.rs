@@ -230,10 +230,10 @@ fn a_substrate_beside_part_of_a_face_does_not_lean_it() {
 
 #[test]
 fn harsh_faces_broken_up_on_the_edge_map_are_still_detected() {
-    // Harsh frames at high magnification (suite 1: session 6 frame 1 at 7466x, session 9
-    // frame 46 at 5640x): Canny on the binned image covers only 52-56 % of the faces,
-    // while the grey-level fit holds them (0.67-0.70 of the calibrated contrast).
-    // Coverage counted fully only from 65 % would miss them (confidence 0.49).
+    // Two harsh frames at high magnification (7466x and 5640x): Canny on the binned
+    // image covers only 52-56 % of the faces, while the grey-level fit holds them
+    // (0.67-0.70 of the calibrated contrast). Coverage counted fully only from 65 %
+    // would miss them (confidence 0.49).
     let sessions = scene::suite(1, 12, 50);
     for (s, f) in [(6, 1), (9, 46)] {
         let session = &sessions[s];
