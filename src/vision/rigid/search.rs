@@ -49,6 +49,9 @@ const MIN_END_FACE_PX: f64 = 3.0;
 /// An edge gives the scale when it lies at least this far from the apex, reference
 /// pixels.
 const MIN_SCALE_OFFSET_PX: f64 = 2.0;
+/// A placement's apex edges count this many votes per detection pixel supporting them
+/// from its apex, as a line's smoothed votes count about two per pixel.
+const VOTES_PER_PIXEL: f32 = 2.0;
 
 /// A placement and its votes.
 #[derive(Debug, Clone, Copy)]
@@ -219,13 +222,15 @@ impl Search {
                 -1.0
             };
             let direction = self.directions[0] + psi;
-            let end_face = EndFace::of(
-                &template.edges[voting[1]],
-                psi,
-                scales.lo / factor,
-                Support::new(self.directions[1] + psi, self.threshold),
-            );
-            for &(ra, va) in a.iter().flatten() {
+            let [first_face, end_face] = [0, 1].map(|k| {
+                ApexEdge::of(
+                    &template.edges[voting[k]],
+                    psi,
+                    scales.lo / factor,
+                    Support::new(self.directions[k] + psi, self.threshold),
+                )
+            });
+            for &(ra, _) in a.iter().flatten() {
                 // The apex where the first apex edge's support ends, and where each of
                 // the second's lines crosses it.
                 let along_run = run_end(
@@ -240,8 +245,8 @@ impl Search {
                 let crossings = b
                     .iter()
                     .flatten()
-                    .filter_map(|&(rb, vb)| Some((line(0, ra).intersect(&line(1, rb))?, vb)));
-                for (apex, vb) in along_run.map(|p| (p, 0.0)).into_iter().chain(crossings) {
+                    .filter_map(|&(rb, _)| line(0, ra).intersect(&line(1, rb)));
+                for apex in along_run.into_iter().chain(crossings) {
                     let apex_det = [apex[0] + self.centre[0], apex[1] + self.centre[1]];
                     if !(apex_det[0] >= 0.0
                         && apex_det[1] >= 0.0
@@ -250,6 +255,13 @@ impl Search {
                     {
                         continue;
                     }
+                    // The apex edges by their support from this apex, not their lines'
+                    // votes: a longer line at this rotation (another probe's beam, a
+                    // line of the ground) crossed by any line of the second edge's
+                    // direction would outvote the tool, and its crossings far from
+                    // either edge's pixels fill the placements.
+                    let [va, vb] = [&first_face, &end_face]
+                        .map(|edge| VOTES_PER_PIXEL * edge.support(pyr, apex_det) as f32);
                     let (scale, vc) = match voting.get(2) {
                         Some(&e) => {
                             let offset = template.edges[e].offset / factor;
@@ -306,7 +318,7 @@ fn run_end(
     direction: f64,
     toward: f64,
     threshold: f32,
-    end_face: &EndFace,
+    end_face: &ApexEdge,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
     let t = [n[1], -n[0]];
@@ -406,19 +418,19 @@ impl Support {
     }
 }
 
-/// The second apex edge as a candidate apex would have it: its unit direction from
-/// the apex, its length at the smallest scale searched (detection pixels) and the
-/// pixels that support it.
-struct EndFace {
+/// An apex edge as a candidate apex would have it: its unit direction from the apex,
+/// its length at the smallest scale searched (detection pixels) and the pixels that
+/// support it.
+struct ApexEdge {
     from_apex: [f64; 2],
     length: f64,
     supports: Support,
 }
 
-impl EndFace {
+impl ApexEdge {
     /// Apex edge `edge` turned by `psi`, at `scale` detection pixels per reference
     /// pixel, supported as `supports` says.
-    fn of(edge: &RigidEdge, psi: f64, scale: f64, supports: Support) -> EndFace {
+    fn of(edge: &RigidEdge, psi: f64, scale: f64, supports: Support) -> ApexEdge {
         let far = if edge.extent[1].abs() >= edge.extent[0].abs() {
             edge.extent[1]
         } else {
@@ -426,19 +438,19 @@ impl EndFace {
         };
         let to_far = edge.point(far);
         let length = to_far[0].hypot(to_far[1]);
-        EndFace {
+        ApexEdge {
             from_apex: rotate([to_far[0] / length, to_far[1] / length], psi),
             length: (length * scale).max(MIN_END_FACE_PX),
             supports,
         }
     }
 
-    /// Pixels of its length the face is looked for over, one per detection pixel.
+    /// Pixels of its length the edge is looked for over, one per detection pixel.
     fn pixels(&self) -> usize {
         self.length as usize
     }
 
-    /// Pixels along the face from `apex` (detection pixels), one per pixel of its
+    /// Pixels along the edge from `apex` (detection pixels), one per pixel of its
     /// length, with a pixel within one across it supporting it.
     fn support(&self, pyr: &Pyramid, apex: [f64; 2]) -> usize {
         let across = [-self.from_apex[1], self.from_apex[0]];
@@ -543,7 +555,7 @@ mod tests {
             rho: 0.0,
         };
         let down = std::f64::consts::FRAC_PI_2;
-        let end_face = EndFace {
+        let end_face = ApexEdge {
             from_apex: [0.0, 1.0],
             length: 20.0,
             supports: Support::new(std::f64::consts::PI, 10.0),
@@ -555,7 +567,7 @@ mod tests {
             "{at:?}"
         );
         // Without the end face there, the longest run's end.
-        let elsewhere = EndFace {
+        let elsewhere = ApexEdge {
             from_apex: [0.0, -1.0],
             ..end_face
         };
