@@ -107,7 +107,9 @@ impl ProbeSet {
     /// (an apex on the other's pyramid), the more confident keeps it and the other
     /// searches the frame again with that pyramid ruled out: a probe whose tracker
     /// took its neighbour (another pyramid of similar angles) is still found where it
-    /// is. What still overlaps after that is refused ([`refuse_shared_tips`]).
+    /// is. A probe refused while another is found searches again with the found
+    /// bodies ruled out. What still overlaps after that is refused
+    /// ([`refuse_shared_tips`]).
     pub fn track(&mut self, frame: &GrayImage, out: &mut [Estimate]) {
         assert_eq!(out.len(), self.trackers.len(), "one estimate per probe");
         self.shared.clear();
@@ -145,6 +147,22 @@ impl ProbeSet {
                 break;
             }
             out[loser] = tracker.retrack_sharing(frame, &self.shared);
+        }
+        // A probe refused while another is found searches again with the found bodies
+        // ruled out: a stronger body of another probe (a cantilever's beam beside a
+        // faint lever) can take every placement its search shortlists.
+        for i in 0..out.len() {
+            for j in 0..out.len() {
+                if out[i].detected {
+                    break;
+                }
+                let Some(claim) = Claim::of(&out[j]).filter(|_| j != i) else {
+                    continue;
+                };
+                if self.trackers[i].exclude_more(claim) {
+                    out[i] = self.trackers[i].retrack_sharing(frame, &self.shared);
+                }
+            }
         }
         refuse_shared_tips(out);
         refuse_scale_outliers(out, &self.groups);

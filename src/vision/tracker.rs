@@ -814,12 +814,12 @@ impl Tracker {
         }
     }
 
-    /// Rules out one more pyramid; false when it already was, no room is left, or the
-    /// probe is a rigid one (whose search has no runners-up to turn to).
+    /// Rules out one more body of another probe; false when it already was, or no
+    /// room is left.
     pub(super) fn exclude_more(&mut self, claim: Claim) -> bool {
         match &mut self.engine {
             Engine::Pyramid(t) => t.exclude_more(claim),
-            Engine::Rigid { .. } => false,
+            Engine::Rigid { tracker, .. } => tracker.exclude_more(claim),
         }
     }
 
@@ -828,7 +828,11 @@ impl Tracker {
     pub(super) fn retrack_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
         match &mut self.engine {
             Engine::Pyramid(t) => t.retrack_sharing(frame, shared),
-            Engine::Rigid { .. } => self.track(frame),
+            Engine::Rigid {
+                tracker,
+                cantilever,
+                ..
+            } => tracker.retrack(frame).with_force(*cantilever),
         }
     }
 }

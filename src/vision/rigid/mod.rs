@@ -27,6 +27,7 @@ pub use autocal::{auto_calibrate, find_tip_points, RigidAutoClicks};
 pub use calibrate::calibrate;
 pub use fit::MAX_EDGES;
 
+use super::claim::{claimed, Claim, MAX_PROBES, NO_CLAIMS};
 use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
 use super::pyramid::Pyramid;
 use super::{EdgeFit, EdgeName, Estimate, Miss, ScaleRange};
@@ -178,7 +179,11 @@ pub struct RigidTracker {
     fitter: Fitter,
     placements: Vec<Pose>,
     last: Option<Pose>,
+    /// The last pose before the frame last tracked, for tracking it again.
+    last_before: Option<Pose>,
     coherence: bool,
+    /// Other probes' bodies ruled out in this frame ([`crate::vision::ProbeSet`]).
+    excluded: [Option<Claim>; MAX_PROBES - 1],
 }
 
 impl RigidTracker {
@@ -196,7 +201,9 @@ impl RigidTracker {
             fitter: Fitter::default(),
             placements: Vec::with_capacity(search::MAX_PLACEMENTS + 1),
             last: None,
+            last_before: None,
             coherence: false,
+            excluded: NO_CLAIMS,
         }
     }
 
@@ -230,6 +237,34 @@ impl RigidTracker {
     /// The estimate of one frame. Its force is the caller's (a rigid probe without a
     /// cantilever has none).
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
+        self.excluded = NO_CLAIMS;
+        self.track_frame(frame)
+    }
+
+    /// Rules out one more body of another probe; false when it already was, or no room
+    /// is left.
+    pub(crate) fn exclude_more(&mut self, claim: Claim) -> bool {
+        if self.excluded.contains(&Some(claim)) {
+            return false;
+        }
+        match self.excluded.iter_mut().find(|c| c.is_none()) {
+            Some(slot) => {
+                *slot = Some(claim);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Tracks the frame just tracked again, from the state before it, with what is
+    /// now ruled out.
+    pub(crate) fn retrack(&mut self, frame: &GrayImage) -> Estimate {
+        self.last = self.last_before;
+        self.track_frame(frame)
+    }
+
+    fn track_frame(&mut self, frame: &GrayImage) -> Estimate {
+        self.last_before = self.last;
         let t = &self.template;
         if frame.width() < MIN_FRAME_PX || frame.height() < MIN_FRAME_PX {
             self.last = None;
@@ -237,15 +272,22 @@ impl RigidTracker {
         }
         if let Some(prior) = self.last.filter(|_| self.coherence) {
             if let Ok(fit) = self.fitter.fit(frame, t, prior, &self.bounds) {
-                let estimate = estimate(t, &fit);
-                self.last = Some(fit.pose);
-                return estimate;
+                if !claimed(&self.excluded, fit.pose.apex) {
+                    let estimate = estimate(t, &fit);
+                    self.last = Some(fit.pose);
+                    return estimate;
+                }
             }
         }
         self.pyramid
             .build_binned(frame, search_binning(t, frame.width()));
-        self.search
-            .placements(&self.pyramid, t, &self.bounds, &mut self.placements);
+        self.search.placements(
+            &self.pyramid,
+            t,
+            &self.bounds,
+            &self.excluded,
+            &mut self.placements,
+        );
         if self.placements.is_empty() {
             self.last = None;
             return Estimate::missed(Miss::NoCandidates, 0.0);
@@ -254,6 +296,12 @@ impl RigidTracker {
         let mut refusal: Option<(Miss, f64)> = None;
         for &placement in &self.placements {
             match self.fitter.fit(frame, t, placement, &self.bounds) {
+                // Not a verdict on this probe: the other placements are tried.
+                Ok(fit) if claimed(&self.excluded, fit.pose.apex) => {
+                    if refusal.is_none() {
+                        refusal = Some((Miss::OtherProbe, 0.0));
+                    }
+                }
                 Ok(fit) => {
                     let sure = fit.confidence >= SURE_CONFIDENCE;
                     if best.as_ref().is_none_or(|b| fit.confidence > b.confidence) {

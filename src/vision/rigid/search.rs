@@ -12,6 +12,7 @@
 //! fit and the verification.
 
 use super::{Bounds, Pose, RigidEdge, RigidTemplate};
+use crate::vision::claim::{claimed, Claim};
 use crate::vision::geometry::{add, clip_to_rect, rotate, scale, sub, truncate_index, Line};
 use crate::vision::pyramid::Pyramid;
 use crate::vision::ScaleRange;
@@ -81,12 +82,13 @@ pub struct Search {
 
 impl Search {
     /// The best placements of `template` in the detection image `pyr`, best first,
-    /// into `out` (frame pixels).
+    /// into `out` (frame pixels); none with its apex on an `excluded` body.
     pub fn placements(
         &mut self,
         pyr: &Pyramid,
         template: &RigidTemplate,
         bounds: &Bounds,
+        excluded: &[Option<Claim>],
         out: &mut Vec<Pose>,
     ) {
         let window_rad = bounds.window_rad;
@@ -183,7 +185,7 @@ impl Search {
                     && (p.apex[0] - s.pose.apex[0]).hypot(p.apex[1] - s.pose.apex[1])
                         <= SAME_APEX_PX * f64::from(pyr.factor)
             };
-            if !out.iter().any(same) {
+            if !out.iter().any(same) && !claimed(excluded, s.pose.apex) {
                 out.push(s.pose);
             }
         }
