@@ -100,6 +100,21 @@ impl Claim {
 /// No body claimed: what a tracker rules out when it tracks on its own.
 pub const NO_CLAIMS: [Option<Claim>; MAX_PROBES - 1] = [None; MAX_PROBES - 1];
 
+/// Adds `claim` to the bodies `claims` rules out; false when it already was, or no
+/// room is left.
+pub fn rule_out(claims: &mut [Option<Claim>], claim: Claim) -> bool {
+    if claims.contains(&Some(claim)) {
+        return false;
+    }
+    match claims.iter_mut().find(|c| c.is_none()) {
+        Some(slot) => {
+            *slot = Some(claim);
+            true
+        }
+        None => false,
+    }
+}
+
 /// Whether point `p` lies on any of the bodies `claims`.
 pub fn claimed(claims: &[Option<Claim>], p: [f64; 2]) -> bool {
     claims.iter().flatten().any(|c| c.contains(p))

@@ -17,7 +17,7 @@ use image::GrayImage;
 use super::bands::{bands, bend_prior, refined_pose, visible_segment};
 use super::calibration::Calibration;
 use super::candidates::Candidates;
-use super::claim::{claimed, Claim, MAX_PROBES, NO_CLAIMS};
+use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
 use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
 use super::hough::Hough;
@@ -254,16 +254,7 @@ impl PyramidTracker {
 
     /// Rules out one more pyramid; false when it already was, or no room is left.
     pub(super) fn exclude_more(&mut self, claim: Claim) -> bool {
-        if self.excluded.contains(&Some(claim)) {
-            return false;
-        }
-        match self.excluded.iter_mut().find(|c| c.is_none()) {
-            Some(slot) => {
-                *slot = Some(claim);
-                true
-            }
-            None => false,
-        }
+        rule_out(&mut self.excluded, claim)
     }
 
     /// Tracks the frame just tracked again, from the state before it (with what is

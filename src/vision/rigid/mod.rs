@@ -27,7 +27,7 @@ pub use autocal::{auto_calibrate, find_tip_points, RigidAutoClicks};
 pub use calibrate::calibrate;
 pub use fit::MAX_EDGES;
 
-use super::claim::{claimed, Claim, MAX_PROBES, NO_CLAIMS};
+use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
 use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
 use super::pyramid::Pyramid;
 use super::{EdgeFit, EdgeName, Estimate, Miss, ScaleRange};
@@ -244,16 +244,7 @@ impl RigidTracker {
     /// Rules out one more body of another probe; false when it already was, or no room
     /// is left.
     pub(crate) fn exclude_more(&mut self, claim: Claim) -> bool {
-        if self.excluded.contains(&Some(claim)) {
-            return false;
-        }
-        match self.excluded.iter_mut().find(|c| c.is_none()) {
-            Some(slot) => {
-                *slot = Some(claim);
-                true
-            }
-            None => false,
-        }
+        rule_out(&mut self.excluded, claim)
     }
 
     /// Tracks the frame just tracked again, from the state before it, with what is
