@@ -184,6 +184,9 @@ pub struct RigidTracker {
     coherence: bool,
     /// Other probes' bodies ruled out in this frame ([`crate::vision::ProbeSet`]).
     excluded: [Option<Claim>; MAX_PROBES - 1],
+    /// Whether the frame last tracked was searched (its placements' scores are in
+    /// `search`).
+    searched: bool,
 }
 
 impl RigidTracker {
@@ -204,6 +207,7 @@ impl RigidTracker {
             last_before: None,
             coherence: false,
             excluded: NO_CLAIMS,
+            searched: false,
         }
     }
 
@@ -248,14 +252,21 @@ impl RigidTracker {
     }
 
     /// Tracks the frame just tracked again, from the state before it, with what is
-    /// now ruled out.
+    /// now ruled out: on the last search's scores when it was searched (the same
+    /// estimate as searching it again, without the votes), else as a new frame.
     pub(crate) fn retrack(&mut self, frame: &GrayImage) -> Estimate {
         self.last = self.last_before;
-        self.track_frame(frame)
+        if !self.searched {
+            return self.track_frame(frame);
+        }
+        self.search
+            .select(&self.pyramid, &self.excluded, &mut self.placements);
+        self.fit_placements(frame)
     }
 
     fn track_frame(&mut self, frame: &GrayImage) -> Estimate {
         self.last_before = self.last;
+        self.searched = false;
         let t = &self.template;
         if frame.width() < MIN_FRAME_PX || frame.height() < MIN_FRAME_PX {
             self.last = None;
@@ -279,6 +290,14 @@ impl RigidTracker {
             &self.excluded,
             &mut self.placements,
         );
+        self.searched = true;
+        self.fit_placements(frame)
+    }
+
+    /// The estimate from the placements found: the most confident verified fit
+    /// (the first sure one), or the most telling refusal.
+    fn fit_placements(&mut self, frame: &GrayImage) -> Estimate {
+        let t = &self.template;
         if self.placements.is_empty() {
             self.last = None;
             return Estimate::missed(Miss::NoCandidates, 0.0);

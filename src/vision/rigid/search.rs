@@ -176,6 +176,14 @@ impl Search {
             }
         }
         self.score(pyr, template, voting, bounds.scales);
+        self.select(pyr, excluded, out);
+    }
+
+    /// The best placements of the last search (on `pyr`), best first, into `out`; none
+    /// with its apex on an `excluded` body. Searching again with more bodies ruled out
+    /// needs no new votes.
+    pub fn select(&self, pyr: &Pyramid, excluded: &[Option<Claim>], out: &mut Vec<Pose>) {
+        out.clear();
         for s in &self.scored {
             if out.len() == MAX_PLACEMENTS {
                 break;
