@@ -12,14 +12,10 @@
 mod tracker_support;
 
 use image::GrayImage;
-use nanoforce::scene::rng::{sub_seed, Rng};
 use nanoforce::scene::{
-    clip_to_frame, render_into, render_tool_into, tool_truth, truth_of, FrameSpec, Session,
-    ToolGeometry, ToolKind,
+    render_into, render_tool_into, tool_clicks, tool_truth, truth_of, FrameSpec, Session, ToolKind,
 };
-use nanoforce::vision::{
-    calibrate_rigid, Estimate, Miss, ProbeSet, ScaleRange, Tracker, TrackerConfig,
-};
+use nanoforce::vision::{Estimate, Miss, ProbeSet, Tracker};
 use tracker_support::{rendered, score, Truth};
 
 fn seed(default: u64) -> u64 {
@@ -192,62 +188,12 @@ fn a_probe_set_on_two_threads_gives_what_it_gives_on_one() {
     }
 }
 
-/// A session of `Session::several`'s two-probe frames whose first probe is a rigid
-/// tool of `kind` (its flanks running out of the frame; a needle's blunt end twice
-/// the tool suite's, for the 1000x-2000x these frames use), out of view in a quarter
-/// of the frames, beside the second probe, an AFM cantilever. The AFM probe's tracker
-/// is calibrated on the reference without the tool.
-fn beside_a_cantilever(kind: ToolKind, seed: u64) -> (Session, Tracker) {
-    let mut session = Session::several(seed, 2, 300, 640, 480);
-    let afm = trackers(&session).swap_remove(1);
-    let mut tool = ToolGeometry::random(kind, sub_seed(seed, 60));
-    if kind == ToolKind::Needle {
-        tool.end_um *= 2.0;
-    }
-    for flank in &mut tool.flanks {
-        flank.span_um = 1000.0;
-    }
-    session.reference.tool = Some(tool);
-    let mut rng = Rng::new(sub_seed(seed, 61));
-    for frame in &mut session.frames {
-        frame.tool = Some(tool);
-        frame.blank |= rng.chance(0.25);
-    }
-    (session, afm)
-}
-
-/// The pixels a person clicks on each edge of the tool in `session`'s reference
-/// (rendered into `reference`): at 10, 50 and 90 % of its visible part.
-fn tool_clicks(session: &Session, reference: &mut GrayImage) -> Vec<(String, Vec<[f64; 2]>)> {
-    let truth = render_tool_into(&session.reference, &[], reference);
-    let (w, h) = (session.reference.width, session.reference.height);
-    truth
-        .edges
-        .iter()
-        .map(|(name, edge)| {
-            let s = clip_to_frame(edge, w, h).expect("every edge is in view");
-            let at = |f: f64| [0, 1].map(|i| s.from[i] + f * (s.to[i] - s.from[i]));
-            (name.to_string(), vec![at(0.1), at(0.5), at(0.9)])
-        })
-        .collect()
-}
-
-/// The tool's scales: 1000x-2000x on a 1500x reference, with 10 % to spare.
-const TOOL_SCALES: ScaleRange = ScaleRange::new(0.6, 1.5);
-
-/// The tool's tracker, calibrated on `session`'s reference from [`tool_clicks`], over
-/// [`TOOL_SCALES`], without coherence.
-fn tool_tracker(session: &Session, kind: ToolKind) -> Tracker {
-    let mut reference = GrayImage::new(1, 1);
-    let clicks = tool_clicks(session, &mut reference);
-    let template = calibrate_rigid(&reference, &clicks, kind.apex_edges()).expect("calibrates");
-    let cfg = TrackerConfig {
-        scale_range: Some(TOOL_SCALES),
-        ..TrackerConfig::default()
-    };
-    let mut tracker = Tracker::rigid(&cfg, template, None).expect("a valid template");
-    tracker.set_coherence(false);
-    tracker
+/// `Session::tool_beside_a_cantilever`'s 300 frames and its two trackers (the tool's
+/// and the cantilever's, calibrated on the shared reference), without coherence.
+fn beside_a_cantilever(kind: ToolKind, seed: u64) -> (Session, Vec<Tracker>) {
+    let session = Session::tool_beside_a_cantilever(kind, seed, 300);
+    let trackers = trackers(&session);
+    (session, trackers)
 }
 
 /// The tool's truth in `spec`, as the scores take it.
@@ -273,9 +219,9 @@ fn a_cantilever_beside_a_rigid_tool_is_tracked_with_it() {
     // 5 and 8 and checked on the held-out 11 (docs/tracker.md, "Several probes in one
     // view").
     for kind in ToolKind::ALL {
-        let (session, afm) = beside_a_cantilever(kind, seed(3));
-        let mut set = ProbeSet::new(vec![tool_tracker(&session, kind), afm], &[0, 0]);
-        let mut alone = tool_tracker(&session, kind);
+        let (session, pair) = beside_a_cantilever(kind, seed(3));
+        let mut set = ProbeSet::new(pair, &[0, 0]);
+        let mut alone = trackers(&session).swap_remove(0);
         let mut frame = GrayImage::new(1, 1);
         let mut estimates = vec![Estimate::default(); 2];
         let (mut truths, mut found) = ([Vec::new(), Vec::new()], [Vec::new(), Vec::new()]);
@@ -323,12 +269,9 @@ fn a_probe_refused_beside_a_found_one_is_searched_again_without_its_body() {
     // the beam's placements fill the lever's whole shortlist, and its tracker alone
     // refuses them all. In a set the cantilever is found, and the lever's tracker
     // searches again with that body ruled out.
-    let (session, afm) = beside_a_cantilever(ToolKind::Tipless, 5);
-    let mut set = ProbeSet::new(
-        vec![tool_tracker(&session, ToolKind::Tipless), afm],
-        &[0, 0],
-    );
-    let mut lone = tool_tracker(&session, ToolKind::Tipless);
+    let (session, pair) = beside_a_cantilever(ToolKind::Tipless, 5);
+    let mut set = ProbeSet::new(pair, &[0, 0]);
+    let mut lone = trackers(&session).swap_remove(0);
     let mut frame = GrayImage::new(1, 1);
     let mut estimates = vec![Estimate::default(); 2];
     let (mut in_set, mut alone, mut regained) = (0, 0, 0);
@@ -356,12 +299,13 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
     // cantilever as two `[[probe]]` entries on one reference: a CSV each, the
     // needle's without force, the cantilever's with it.
     const FRAMES: usize = 24;
-    let (session, _) = beside_a_cantilever(ToolKind::Needle, seed(3));
+    let session = Session::tool_beside_a_cantilever(ToolKind::Needle, seed(3), 300);
     let dir = tempfile::tempdir().unwrap();
     let frames_dir = dir.path().join("frames");
     std::fs::create_dir(&frames_dir).unwrap();
     let mut frame = GrayImage::new(1, 1);
-    let clicks = tool_clicks(&session, &mut frame);
+    let clicks = tool_clicks(&session.reference);
+    render_tool_into(&session.reference, &[], &mut frame);
     frame.save(dir.path().join("reference.png")).unwrap();
     let mut truths = Vec::new();
     for (k, spec) in session.frames.iter().take(FRAMES).enumerate() {
@@ -384,7 +328,10 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
         "[[probe]]\nname = \"needle\"\n[probe.tracker]\nscale_range = [{}, {}]\n\
          [probe.tracker.calibration]\nreference_image = \"reference.png\"\n\
          apex = [\"{}\", \"{}\"]\n[probe.tracker.calibration.edges]\n",
-        TOOL_SCALES.lo, TOOL_SCALES.hi, apex[0], apex[1]
+        session.scales().lo,
+        session.scales().hi,
+        apex[0],
+        apex[1]
     );
     for (name, p) in &clicks {
         toml.push_str(&format!("{name} = {}\n", points(p)));

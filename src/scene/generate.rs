@@ -7,6 +7,7 @@ use super::geometry::{probe_outline, Entry};
 use super::rng::{sub_seed, Rng};
 use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
 use super::spec::{FrameSpec, Look, Others, Placement, Style};
+use super::tool_shape::{ToolGeometry, ToolKind};
 use crate::vision::{Threshold, DEFAULT_WINDOW_DEG};
 
 /// Share of each style in mixed sets (as in the public `mixed` sample).
@@ -273,6 +274,37 @@ impl Session {
             window_deg: DEFAULT_WINDOW_DEG,
             click_seed: sub_seed(seed, 3),
         }
+    }
+}
+
+/// Share of the frames of [`Session::tool_beside_a_cantilever`] without the tool.
+const TOOL_OUT_OF_VIEW: f64 = 0.25;
+/// A needle's blunt end there, over a random needle's: the frames' 1000x-2000x show
+/// it at 10-30 px.
+const NEEDLE_END_ZOOM: f64 = 2.0;
+/// Its flanks' bowed span there, micrometres: past the border of every frame.
+const LONG_FLANK_UM: f64 = 1000.0;
+
+impl Session {
+    /// `n` of [`Session::several`]'s two-probe 640x480 frames whose first probe is a
+    /// rigid tool of `kind` (its flanks running out of the frame), out of view in
+    /// [`TOOL_OUT_OF_VIEW`] of the frames, beside the second, an AFM cantilever.
+    pub fn tool_beside_a_cantilever(kind: ToolKind, seed: u64, n: usize) -> Session {
+        let mut session = Session::several(seed, 2, n, 640, 480);
+        let mut tool = ToolGeometry::random(kind, sub_seed(seed, 60));
+        if kind == ToolKind::Needle {
+            tool.end_um *= NEEDLE_END_ZOOM;
+        }
+        for flank in &mut tool.flanks {
+            flank.span_um = LONG_FLANK_UM;
+        }
+        session.reference.tool = Some(tool);
+        let mut rng = Rng::new(sub_seed(seed, 61));
+        for frame in &mut session.frames {
+            frame.tool = Some(tool);
+            frame.blank |= rng.chance(TOOL_OUT_OF_VIEW);
+        }
+        session
     }
 }
 

@@ -50,7 +50,7 @@ pub use session::{
     Clicks, FrameFormat, Session, SessionError, Setup, FRAME_RATE_HZ, MAGNIFICATIONS,
 };
 pub use spec::{FrameSpec, Look, Others, Placement, Style, MAX_OTHER_PROBES};
-pub use tool::{clip_to_frame, tool_truth, ToolTruth};
+pub use tool::{clip_to_frame, tool_clicks, tool_truth, ToolTruth};
 pub use tool_shape::{Flank, ToolGeometry, ToolKind, DEFAULT_SPAN_UM, MAX_BOW, TOOL_FLANKS};
 pub use tool_suite::{
     tool_suite, ToolSession, CLICKS_PER_EDGE, MAG_RATIO as TOOL_MAG_RATIO, TIP_MARGIN_PX,

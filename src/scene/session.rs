@@ -14,8 +14,10 @@ use super::geometry::{Entry, ProbeGeometry};
 use super::render::{truth_of, Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
+use super::tool::tool_clicks;
 use crate::vision::{
-    Calibration, CalibrationConfig, Threshold, Tracker, TrackerConfig, VisionError, SINGLE_NAME,
+    calibrate_rigid, Calibration, CalibrationConfig, ScaleRange, Threshold, Tracker, TrackerConfig,
+    VisionError, SINGLE_NAME,
 };
 
 /// Magnifications an operator picks from (those of the public samples).
@@ -131,12 +133,28 @@ impl Session {
 
     /// A tracker for each probe of the reference, in order, calibrated on the rendered
     /// reference with [`Session::tracker_config_of`] and forces from its geometry: the
-    /// trackers `replay` builds from the session's probe.toml.
+    /// trackers `replay` builds from the session's probe.toml. A tool (probe 0 only) is
+    /// calibrated from [`tool_clicks`], over the scales of the session's frames (10 %
+    /// to spare, as a lab states them), without a cantilever.
     pub fn trackers(&self) -> Result<Vec<Tracker>, VisionError> {
         let mut reference = GrayImage::new(1, 1);
         Renderer::new().render_into(&self.reference, &mut reference);
         (0..self.reference.probe_count())
             .map(|k| {
+                if let Some(tool) = self.reference.tool.filter(|_| k == 0) {
+                    let template = calibrate_rigid(
+                        &reference,
+                        &tool_clicks(&self.reference),
+                        tool.kind.apex_edges(),
+                    )?;
+                    let cfg = TrackerConfig {
+                        threshold: self.threshold,
+                        window_deg: self.window_deg,
+                        scale_range: Some(self.scales()),
+                        ..TrackerConfig::default()
+                    };
+                    return Ok(Tracker::rigid(&cfg, template, None)?);
+                }
                 let clicks = self.calibration_of(k);
                 let cfg = self.tracker_config_with(clicks.clone());
                 let cal = Calibration::from_reference(&reference, &clicks, &cfg)?;
@@ -147,6 +165,19 @@ impl Session {
                 Ok(Tracker::new(&cfg, cal, Some(probe.cantilever())))
             })
             .collect()
+    }
+
+    /// The scales the session's frames show, over the reference's, with 10 % to spare:
+    /// the `tracker.scale_range` a lab would state for them.
+    pub fn scales(&self) -> ScaleRange {
+        let (lo, hi) = self
+            .frames
+            .iter()
+            .map(|f| f.magnification / self.reference.magnification)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+                (lo.min(r), hi.max(r))
+            });
+        ScaleRange::new(lo / 1.1, hi * 1.1)
     }
 
     /// As [`Session::clicks`] for probe `k` of the reference (0: its own, then the

@@ -88,6 +88,24 @@ pub fn tool_truth(spec: &FrameSpec) -> Option<ToolTruth> {
 
 /// The part of `segment` inside a `width` x `height` frame's pixel area (pixel centres
 /// at integers, so x from -0.5 to width - 0.5), from the end nearer `segment.from`.
+/// The pixels a person clicks on each edge of the tool in `spec` (its reference), in
+/// [`super::ToolKind::edge_names`] order: at 10, 50 and 90 % of the edge's part in
+/// view. None for a spec without a tool in view.
+pub fn tool_clicks(spec: &FrameSpec) -> Vec<(String, Vec<[f64; 2]>)> {
+    let Some(truth) = tool_truth(spec) else {
+        return Vec::new();
+    };
+    truth
+        .edges
+        .iter()
+        .filter_map(|(name, edge)| {
+            let s = clip_to_frame(edge, spec.width, spec.height)?;
+            let at = |f: f64| [0, 1].map(|i| s.from[i] + f * (s.to[i] - s.from[i]));
+            Some((name.to_string(), vec![at(0.1), at(0.5), at(0.9)]))
+        })
+        .collect()
+}
+
 pub fn clip_to_frame(segment: &Segment, width: u32, height: u32) -> Option<Segment> {
     let d = sub(segment.to, segment.from);
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
