@@ -9,6 +9,8 @@
 //!   one view, and the first of them alone on the same frames;
 //! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
 //!   jaw), each frame searched whole, over eight frames of its tool suite;
+//! - `probes/tool-beside-cantilever/<kind>`: a rigid tool beside an AFM cantilever,
+//!   both tracked, and `<kind>-out-of-view` with the tool out of view;
 //! - `realbg/faded-faces`: the 50 frames of a real-background session whose faces
 //!   fade into a bright textured ground under noise 30-48
 //!   (`scene::real_suite(13, 12, 50, crops)[10]`), per frame: the frames where the
@@ -176,6 +178,44 @@ fn bench_probes(c: &mut Criterion) {
     }
 }
 
+/// `probes/tool-beside-cantilever/<kind>[-out-of-view]`: a rigid tool and an AFM
+/// cantilever in one view (`Session::tool_beside_a_cantilever(kind, 3, 60)`), both in
+/// view, or the tool out of view (searched again without the cantilever's body), on
+/// eight frames each, one thread, each frame searched whole.
+fn bench_tool_beside_cantilever(c: &mut Criterion) {
+    let mut group = c.benchmark_group("probes/tool-beside-cantilever");
+    for kind in ToolKind::ALL {
+        let session = Session::tool_beside_a_cantilever(kind, 3, 60);
+        for tool_in_view in [true, false] {
+            let frames: Vec<GrayImage> = session
+                .frames
+                .iter()
+                .filter(|f| f.blank != tool_in_view && f.others.iter().all(|o| !o.blank))
+                .take(8)
+                .map(|f| scene::render(f).0)
+                .collect();
+            let mut trackers = session
+                .trackers()
+                .expect("the rendered reference calibrates");
+            trackers.iter_mut().for_each(|t| t.set_coherence(false));
+            let mut set = ProbeSet::new(trackers, &[0, 0]);
+            let mut out = vec![Estimate::default(); 2];
+            group.throughput(Throughput::Elements(frames.len() as u64));
+            let name = match tool_in_view {
+                true => kind.name().to_string(),
+                false => format!("{}-out-of-view", kind.name()),
+            };
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    for f in &frames {
+                        set.track(f, &mut out);
+                    }
+                })
+            });
+        }
+    }
+}
+
 /// `rigid/<kind>`: a rigid probe searched whole in each of eight frames of the first
 /// sessions of its tool suite (synthetic backgrounds), per frame.
 fn bench_rigid(c: &mut Criterion) {
@@ -268,6 +308,7 @@ criterion_group!(
     bench_clutter,
     bench_probes,
     bench_rigid,
+    bench_tool_beside_cantilever,
     bench_realbg
 );
 criterion_main!(benches);
