@@ -86,11 +86,9 @@ pub fn tool_truth(spec: &FrameSpec) -> Option<ToolTruth> {
     })
 }
 
-/// The part of `segment` inside a `width` x `height` frame's pixel area (pixel centres
-/// at integers, so x from -0.5 to width - 0.5), from the end nearer `segment.from`.
 /// The pixels a person clicks on each edge of the tool in `spec` (its reference), in
 /// [`super::ToolKind::edge_names`] order: at 10, 50 and 90 % of the edge's part in
-/// view. None for a spec without a tool in view.
+/// view; none for a spec without a tool in view.
 pub fn tool_clicks(spec: &FrameSpec) -> Vec<(String, Vec<[f64; 2]>)> {
     let Some(truth) = tool_truth(spec) else {
         return Vec::new();
@@ -106,6 +104,8 @@ pub fn tool_clicks(spec: &FrameSpec) -> Vec<(String, Vec<[f64; 2]>)> {
         .collect()
 }
 
+/// The part of `segment` inside a `width` x `height` frame's pixel area (pixel centres
+/// at integers, so x from -0.5 to width - 0.5), from the end nearer `segment.from`.
 pub fn clip_to_frame(segment: &Segment, width: u32, height: u32) -> Option<Segment> {
     let d = sub(segment.to, segment.from);
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -302,6 +302,37 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_person_clicks_each_edge_in_view_within_it() {
+        let spec = plain(
+            ToolGeometry::typical(ToolKind::Gripper),
+            Entry::Left,
+            4.0,
+            [330.0, 250.0],
+        );
+        let truth = tool_truth(&spec).unwrap();
+        let clicks = tool_clicks(&spec);
+        assert_eq!(clicks.len(), truth.edges.len());
+        for ((name, points), (edge_name, edge)) in clicks.iter().zip(&truth.edges) {
+            assert_eq!(name, edge_name);
+            let d = sub(edge.to, edge.from);
+            let length = d[0].hypot(d[1]);
+            for p in points {
+                let q = sub(*p, edge.from);
+                let across = (d[0] * q[1] - d[1] * q[0]) / length;
+                let along = (d[0] * q[0] + d[1] * q[1]) / length;
+                assert!(
+                    across.abs() < 1e-9 && (0.0..=length).contains(&along),
+                    "{name}"
+                );
+                assert!((0.0..640.0).contains(&p[0]) && (0.0..480.0).contains(&p[1]));
+            }
+        }
+        let mut blank = spec;
+        blank.blank = true;
+        assert!(tool_clicks(&blank).is_empty());
     }
 
     #[test]
