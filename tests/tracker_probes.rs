@@ -15,7 +15,8 @@ use image::GrayImage;
 use nanoforce::scene::{
     render_into, render_tool_into, tool_clicks, tool_truth, truth_of, FrameSpec, Session, ToolKind,
 };
-use nanoforce::vision::{Estimate, Miss, ProbeSet, Tracker};
+use nanoforce::session::results::read_results;
+use nanoforce::vision::{CalibrationConfig, Estimate, Miss, ProbeSet, Tracker};
 use tracker_support::{rendered, score, Truth};
 
 fn seed(default: u64) -> u64 {
@@ -316,13 +317,7 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
             .save(frames_dir.join(format!("frame_{k:05}.png")))
             .unwrap();
     }
-    let points = |p: &[[f64; 2]]| {
-        let items: Vec<String> = p
-            .iter()
-            .map(|q| format!("[{:.2}, {:.2}]", q[0], q[1]))
-            .collect();
-        format!("[{}]", items.join(", "))
-    };
+    let points = CalibrationConfig::toml_points;
     let apex = ToolKind::Needle.apex_edges();
     let mut toml = format!(
         "[[probe]]\nname = \"needle\"\n[probe.tracker]\nscale_range = [{}, {}]\n\
@@ -336,21 +331,7 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
     for (name, p) in &clicks {
         toml.push_str(&format!("{name} = {}\n", points(p)));
     }
-    let afm = session.reference.nth_probe(1).expect("placed").probe;
-    let c = session.clicks_of(1);
-    toml.push_str(&format!(
-        "\n[[probe]]\nname = \"cantilever\"\n[probe.cantilever]\nlength_um = {:.3}\n\
-         spring_constant_n_per_m = {:.4}\n[probe.tracker]\nthreshold = {}\nwindow_deg = {:.1}\n\
-         [probe.tracker.calibration]\nreference_image = \"reference.png\"\n\
-         red = {}\nblue = {}\ngreen = {}\n",
-        afm.length_um,
-        afm.spring_constant_n_per_m,
-        session.threshold,
-        session.window_deg,
-        points(&c.red),
-        points(&c.blue),
-        points(&c.green),
-    ));
+    toml.push_str(&session.probe_entry(1, "cantilever"));
     std::fs::write(dir.path().join("probe.toml"), &toml).unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
         .arg("replay")
@@ -366,43 +347,27 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
         "{}\n{toml}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let read = |name: &str| {
-        let text = std::fs::read_to_string(dir.path().join(format!("out.{name}.csv"))).unwrap();
-        let mut lines = text.lines();
-        let header: Vec<String> = lines
-            .next()
-            .unwrap()
-            .split(',')
-            .map(str::to_string)
-            .collect();
-        let rows: Vec<Vec<String>> = lines
-            .map(|l| l.split(',').map(str::to_string).collect())
-            .collect();
-        (header, rows)
-    };
     let mut found = [0, 0];
     for (k, name) in ["needle", "cantilever"].iter().enumerate() {
-        let (header, rows) = read(name);
-        let col = |c: &str| header.iter().position(|h| h == c).unwrap();
+        let rows = read_results(&dir.path().join(format!("out.{name}.csv"))).unwrap();
         assert_eq!(rows.len(), FRAMES, "{name}");
         for (row, (tool, afm)) in rows.iter().zip(&truths) {
-            let detected = row[col("detected")] == "1" || row[col("detected")] == "true";
             let (in_view, angle) = match k {
                 0 => (tool.in_view, tool.angle_deg),
                 _ => (afm.probe_in_view, afm.angle_deg),
             };
-            if !detected {
-                assert!(!row[col("miss")].is_empty(), "{name}: {row:?}");
+            if !row.detected {
+                assert!(!row.miss.is_empty(), "{name}: {row:?}");
                 continue;
             }
             assert!(in_view, "{name} detected out of view: {row:?}");
             found[k] += 1;
             // Each file holds its own probe's angles, within the pair's worst error
             // (the needle's, 0.44 deg on seed 3).
-            let err = row[col("angle_deg")].parse::<f64>().unwrap() - angle;
+            let err = row.angle_deg.unwrap() - angle;
             assert!(err.abs() < 0.5, "{name}: {row:?} vs {angle}");
             // Force for the cantilever only.
-            assert_eq!(row[col("force_nN")].is_empty(), k == 0, "{name}: {row:?}");
+            assert_eq!(row.force_nn.is_none(), k == 0, "{name}: {row:?}");
         }
     }
     let shown = |k: usize| {

@@ -243,38 +243,49 @@ impl Session {
     pub fn probe_toml(&self) -> String {
         let names = self.probe_names();
         let mut text = String::from("# Probe and tracker settings for one recorded session.\n");
-        for (k, name) in names.iter().enumerate() {
-            let prefix = match names.len() {
-                1 => String::new(),
-                _ => {
-                    let _ = write!(text, "\n[[probe]]\nname = \"{name}\"\n");
-                    "probe.".to_string()
+        match names.len() {
+            1 => text.push_str(&self.probe_settings(0, "")),
+            _ => {
+                for (k, name) in names.iter().enumerate() {
+                    text.push_str(&self.probe_entry(k, name));
                 }
-            };
-            let probe = self
-                .reference
-                .nth_probe(k)
-                .map_or(*self.probe(), |s| s.probe);
-            let clicks = self.clicks_of(k);
-            let points = CalibrationConfig::toml_points;
-            let _ = write!(
-                text,
-                "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n\
-                 [{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n\n\
-                 [{prefix}tracker.calibration]\n\
-                 reference_image = \"reference.png\"  # relative to this file\n\
-                 # pixels marked on each tip edge in the reference image; x right, y down\n\
-                 red = {}\nblue = {}\ngreen = {}\n",
-                probe.length_um,
-                probe.spring_constant_n_per_m,
-                self.threshold,
-                self.window_deg,
-                points(&clicks.red),
-                points(&clicks.blue),
-                points(&clicks.green),
-            );
+            }
         }
         text
+    }
+
+    /// Probe `k`'s `[[probe]]` entry of [`Session::probe_toml`], named `name`.
+    pub fn probe_entry(&self, k: usize, name: &str) -> String {
+        format!(
+            "\n[[probe]]\nname = \"{name}\"\n{}",
+            self.probe_settings(k, "probe.")
+        )
+    }
+
+    /// Probe `k`'s cantilever, tracker and calibration tables, their names prefixed
+    /// with `prefix`.
+    fn probe_settings(&self, k: usize, prefix: &str) -> String {
+        let probe = self
+            .reference
+            .nth_probe(k)
+            .map_or(*self.probe(), |s| s.probe);
+        let clicks = self.clicks_of(k);
+        let points = CalibrationConfig::toml_points;
+        format!(
+            "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n\
+             [{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n\n\
+             [{prefix}tracker.calibration]\n\
+             reference_image = \"reference.png\"  # relative to this file\n\
+             # pixels marked on each tip edge in the reference image; x right, y down\n\
+             red = {}\nblue = {}\ngreen = {}\n",
+            probe.length_um,
+            probe.spring_constant_n_per_m,
+            self.threshold,
+            self.window_deg,
+            points(&clicks.red),
+            points(&clicks.blue),
+            points(&clicks.green),
+        )
     }
 
     /// Writes the session into `dir` (created if needed) and returns every frame's truth
