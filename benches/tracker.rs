@@ -10,7 +10,8 @@
 //! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
 //!   jaw), each frame searched whole, over eight frames of its tool suite;
 //! - `probes/tool-beside-cantilever/<kind>`: a rigid tool beside an AFM cantilever,
-//!   both tracked, and `<kind>-out-of-view` with the tool out of view;
+//!   both tracked, `<kind>-out-of-view` with the tool out of view, and each on two
+//!   threads (`-two-threads`);
 //! - `realbg/faded-faces`: the 50 frames of a real-background session whose faces
 //!   fade into a bright textured ground under noise 30-48
 //!   (`scene::real_suite(13, 12, 50, crops)[10]`), per frame: the frames where the
@@ -178,10 +179,11 @@ fn bench_probes(c: &mut Criterion) {
     }
 }
 
-/// `probes/tool-beside-cantilever/<kind>[-out-of-view]`: a rigid tool and an AFM
-/// cantilever in one view (`Session::tool_beside_a_cantilever(kind, 3, 60)`), both in
-/// view, or the tool out of view (searched again without the cantilever's body), on
-/// eight frames each, one thread, each frame searched whole.
+/// `probes/tool-beside-cantilever/<kind>[-out-of-view][-two-threads]`: a rigid tool
+/// and an AFM cantilever in one view (`Session::tool_beside_a_cantilever(kind, 3,
+/// 60)`), both in view, or the tool out of view (searched again without the
+/// cantilever's body), on eight frames each, each frame searched whole, on one thread
+/// or on two (as the daemon tracks them).
 fn bench_tool_beside_cantilever(c: &mut Criterion) {
     let mut group = c.benchmark_group("probes/tool-beside-cantilever");
     for kind in ToolKind::ALL {
@@ -194,24 +196,27 @@ fn bench_tool_beside_cantilever(c: &mut Criterion) {
                 .take(8)
                 .map(|f| scene::render(f).0)
                 .collect();
-            let mut trackers = session
-                .trackers()
-                .expect("the rendered reference calibrates");
-            trackers.iter_mut().for_each(|t| t.set_coherence(false));
-            let mut set = ProbeSet::new(trackers, &[0, 0]);
-            let mut out = vec![Estimate::default(); 2];
             group.throughput(Throughput::Elements(frames.len() as u64));
-            let name = match tool_in_view {
-                true => kind.name().to_string(),
-                false => format!("{}-out-of-view", kind.name()),
-            };
-            group.bench_function(name, |b| {
-                b.iter(|| {
-                    for f in &frames {
-                        set.track(f, &mut out);
-                    }
-                })
-            });
+            for threads in [1, 2] {
+                let mut trackers = session
+                    .trackers()
+                    .expect("the rendered reference calibrates");
+                trackers.iter_mut().for_each(|t| t.set_coherence(false));
+                let mut set = ProbeSet::new(trackers, &[0, 0]);
+                if threads == 2 {
+                    set = set.on_two_threads().expect("a second thread starts");
+                }
+                let mut out = vec![Estimate::default(); 2];
+                let view = if tool_in_view { "" } else { "-out-of-view" };
+                let on = if threads == 2 { "-two-threads" } else { "" };
+                group.bench_function(format!("{}{view}{on}", kind.name()), |b| {
+                    b.iter(|| {
+                        for f in &frames {
+                            set.track(f, &mut out);
+                        }
+                    })
+                });
+            }
         }
     }
 }
