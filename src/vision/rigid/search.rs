@@ -338,10 +338,7 @@ fn run_end(
     // Detection pixels of the point `u` along the line.
     let point = |u: f64| add(foot, scale(t, u));
     let supports = Support::new(direction, threshold);
-    let supported = |u: f64| {
-        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
-            .any(|k| supports.at(pyr, add(point(u), scale(n, f64::from(k)))))
-    };
+    let supported = |u: f64| supports.near(pyr, point(u), n);
     // The longest run (length, from, to); the best run end by the end face's support
     // (support, position), and the end face's support at the longest run's end.
     let mut longest = (0.0, 0.0, 0.0);
@@ -426,6 +423,13 @@ impl Support {
             && pyr.gx[i] * self.cos + pyr.gy[i] * self.sin
                 >= self.min_dot * pyr.mag[i] / self.threshold
     }
+
+    /// Whether a detection pixel within [`RUN_HALF_WIDTH`] of `p` along the unit
+    /// vector `across` supports the edge.
+    fn near(&self, pyr: &Pyramid, p: [f64; 2], across: [f64; 2]) -> bool {
+        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
+            .any(|j| self.at(pyr, add(p, scale(across, f64::from(j)))))
+    }
 }
 
 /// An apex edge as a candidate apex would have it: its unit direction from the apex,
@@ -467,8 +471,7 @@ impl ApexEdge {
         (1..=self.pixels())
             .filter(|&k| {
                 let on = add(apex, scale(self.from_apex, k as f64));
-                (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
-                    .any(|j| self.supports.at(pyr, add(on, scale(across, f64::from(j)))))
+                self.supports.near(pyr, on, across)
             })
             .count()
     }
