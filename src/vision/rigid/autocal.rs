@@ -266,8 +266,9 @@ fn calibrated(
         scale: 1.0,
         apex: template.apex,
     };
-    let check =
-        RigidTracker::new(template.clone(), DEFAULT_WINDOW_DEG).track_from(reference, at_home);
+    let check = RigidTracker::new(template.clone(), DEFAULT_WINDOW_DEG)
+        .whole_corner()
+        .track_from(reference, at_home);
     if let Some(miss) = check.miss {
         return Err(AutoCalError::NotFound {
             edges: "a probe",

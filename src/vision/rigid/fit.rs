@@ -19,7 +19,7 @@ use nalgebra::{Matrix4, Vector4};
 
 use super::station::{Located, Stations};
 use super::{Bounds, Pose, RigidTemplate};
-use crate::vision::geometry::{add, dot, rotate, scale, sub};
+use crate::vision::geometry::{add, bilinear, dot, rotate, scale, sub};
 use crate::vision::Miss;
 
 /// Most edges a rigid template may have.
@@ -85,6 +85,16 @@ const SIGMA_FACTOR: f64 = 1.2;
 /// dark lever's end) shows no step there.
 const APEX_STATIONS: usize = 3;
 const NEAREST_PX: f64 = 3.0;
+/// Past the apex, a level this share of the way from the surroundings' to the
+/// probe's is a body over the tip (docs/tracker.md, "What the tracker refuses, and
+/// why").
+const COVERED_APEX_SHARE: f64 = 0.5;
+/// A corner station's inside within this share of the calibrated step of the probe's
+/// level carries the probe on.
+const COVERED_LEVEL: f64 = 0.25;
+/// Where the levels inside a corner and past the apex are read from, pixels: clear of
+/// the blur.
+const LEVEL_NEAR: f64 = 2.5;
 
 /// One edge as a fit saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -207,6 +217,9 @@ pub struct Fitter {
     stations: Stations,
     points: Vec<Point>,
     residuals: Vec<f64>,
+    /// Whether both apex edges must show the corner: on a reference, where nothing
+    /// touches the tip and a misplaced tip point must not verify.
+    pub(super) whole_corner: bool,
 }
 
 impl Fitter {
@@ -416,6 +429,8 @@ impl Fitter {
         // Per edge in view, the median level on the probe's side of its holding
         // stations.
         let mut inside = [f64::NAN; MAX_EDGES];
+        // The apex edge whose corner does not show, if one does not.
+        let mut hidden_corner = None;
         for (e, edge) in t.edges.iter().enumerate() {
             let points = || self.points.iter().filter(move |p| p.edge == e);
             let total = points().count();
@@ -476,7 +491,11 @@ impl Fitter {
                 // the reference steps by less; a larger step is no sign of another
                 // body either, as the level outside the probe changes as it moves.
                 refusal = Some(Miss::WrongAppearance(edge.name));
-            } else if is_apex_edge && !self.apex_held(frame, t, &pose, e) {
+            } else if is_apex_edge
+                && !self.apex_held(frame, t, &pose, e)
+                && hidden_corner.replace(e).is_some()
+            {
+                // Neither apex edge shows the corner: the tip is hidden.
                 refusal = Some(Miss::EdgeMissing(edge.name));
             } else if self.runs_on(t, &pose, e) {
                 refusal = Some(Miss::ScaleMismatch);
@@ -488,7 +507,13 @@ impl Fitter {
         let size_unseen = (0..t.edges.len()).any(|e| away(&e))
             && !(0..t.edges.len()).any(|e| away(&e) && edges[e].is_some());
         let refusal = refusal.or_else(|| {
-            if size_unseen {
+            // One apex edge may lose its corner to a particle beside the tip, while
+            // the other shows it and the apex itself shows the surroundings.
+            let hidden = hidden_corner
+                .filter(|&e| self.whole_corner || !self.particle_beside_tip(frame, t, &pose, e));
+            if let Some(e) = hidden {
+                Some(Miss::EdgeMissing(t.edges[e].name))
+            } else if size_unseen {
                 Some(Miss::ScaleUnseen)
             } else if let Some(e) = not_one_body(t, &inside) {
                 Some(Miss::WrongAppearance(t.edges[e].name))
@@ -511,6 +536,78 @@ impl Fitter {
         }
     }
 
+    /// Whether apex edge `hidden`, whose corner does not show, is hidden by a particle
+    /// beside the tip rather than missing: the probe's level carries on along the
+    /// inside of its corner stations (within [`COVERED_LEVEL`] of the calibrated step
+    /// of the level at the apex edges' holding stations), and past the apex, along the
+    /// outward bisector of the apex edges (from [`LEVEL_NEAR`] on, five pixels wide
+    /// and deep), the frame lies less than [`COVERED_APEX_SHARE`] of the way from the
+    /// surroundings' level to the probe's. A patch over the tip leaves the probe's
+    /// level past the apex; a body that only looks like the probe has no inside there.
+    fn particle_beside_tip(
+        &self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: &Pose,
+        hidden: usize,
+    ) -> bool {
+        let normal = |e: usize| rotate(t.edges[e].normal, pose.psi);
+        let [a, b] = t.apex_edges;
+        let inward = add(normal(a), normal(b));
+        let len = dot(inward, inward).sqrt();
+        if len < 1e-9 {
+            return false;
+        }
+        let out = scale(inward, -1.0 / len);
+        let (mut probe, mut around, mut n) = (0.0, 0.0, 0usize);
+        for p in self
+            .points
+            .iter()
+            .filter(|p| (p.edge == a || p.edge == b) && p.in_view && Self::holds_final(t, pose, p))
+        {
+            let edge = &t.edges[p.edge];
+            probe += p.inside;
+            around += p.inside - edge.polarity * p.step * edge.step;
+            n += 1;
+        }
+        if n == 0 {
+            return false;
+        }
+        let (probe, around) = (probe / n as f64, around / n as f64);
+        // The mean level over a square of five pixels a side whose near side's centre
+        // lies at `from`, reaching along `dir`.
+        let level = |from: [f64; 2], dir: [f64; 2]| {
+            let side = [-dir[1], dir[0]];
+            let (mut sum, mut m) = (0.0, 0usize);
+            for d in 0..5 {
+                for j in -2..=2 {
+                    let q = add(
+                        add(from, scale(dir, f64::from(d))),
+                        scale(side, f64::from(j)),
+                    );
+                    if let Some(v) = bilinear(frame, q) {
+                        sum += v;
+                        m += 1;
+                    }
+                }
+            }
+            (m > 0).then(|| sum / m as f64)
+        };
+        let edge = &t.edges[hidden];
+        let inside = normal(hidden);
+        let carries_on = self
+            .corner_stations(t, hidden)
+            .into_iter()
+            .flatten()
+            .all(|p| {
+                let at = add(pose.place(edge, p.tau), scale(inside, LEVEL_NEAR));
+                level(at, inside)
+                    .is_some_and(|v| (v - probe).abs() <= COVERED_LEVEL * (probe - around).abs())
+            });
+        let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out);
+        carries_on && past.is_some_and(|v| (v - around) / (probe - around) < COVERED_APEX_SHARE)
+    }
+
     fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
         Self::steps_within(t, pose, p, HELD_PX)
     }
@@ -530,10 +627,9 @@ impl Fitter {
         }
     }
 
-    /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
-    /// show it within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
-    /// ([`Fitter::shown_off`]).
-    fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+    /// The [`APEX_STATIONS`] stations of apex edge `e` nearest the apex, counted from
+    /// it (fewer when the edge has fewer).
+    fn corner_stations(&self, t: &RigidTemplate, e: usize) -> [Option<Point>; APEX_STATIONS] {
         let edge = &t.edges[e];
         // Stations run from extent[0] to extent[1]; the apex end is the one nearer
         // tau = 0.
@@ -541,7 +637,6 @@ impl Fitter {
         let count = self.points.iter().filter(|p| p.edge == e).count();
         let nearest = APEX_STATIONS.min(count);
         let skip = if from_low { 0 } else { count - nearest };
-        // Counted from the apex.
         let mut stations = [None; APEX_STATIONS];
         for (k, p) in self
             .points
@@ -553,6 +648,15 @@ impl Fitter {
         {
             stations[if from_low { k } else { nearest - 1 - k }] = Some(*p);
         }
+        stations
+    }
+
+    /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
+    /// show it within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
+    /// ([`Fitter::shown_off`]).
+    fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+        let stations = self.corner_stations(t, e);
+        let nearest = stations.iter().flatten().count();
         let mut shown = 0;
         for (slot, p) in stations.iter().enumerate() {
             let Some(p) = p else { continue };

@@ -211,6 +211,14 @@ impl RigidTracker {
         }
     }
 
+    /// The same tracker demanding both apex edges show the corner, as a reference
+    /// does (nothing touches its tip): a tip point placed off the corner does not
+    /// verify with one apex edge's corner unseen.
+    pub(super) fn whole_corner(mut self) -> RigidTracker {
+        self.fitter.whole_corner = true;
+        self
+    }
+
     /// Searches and accepts only scales in `scales`, which must lie inside
     /// [`RIGID_SCALES`].
     pub fn with_scales(mut self, scales: ScaleRange) -> Result<RigidTracker, RigidError> {
@@ -591,27 +599,30 @@ mod tests {
 
     /// A needle whose tip touches a particle drawn under it (8 px across, beside the
     /// upper flank's first 13 px from the apex): a particle brighter than the needle
-    /// (250 against 180) leaves the tip's outline stepping the other way, and the
-    /// needle is detected; a particle at the needle's level hides the tip, and the
-    /// frame is refused for that flank.
+    /// (250 against 180) leaves the tip's outline stepping the other way, one at the
+    /// needle's level hides the flank's corner but leaves the surroundings past the
+    /// apex, and the needle is detected either way; a patch at the needle's level over
+    /// the corner and past it hides the tip, and the frame is refused for that flank.
     #[test]
-    fn a_tip_touching_a_brighter_particle_shows_its_outline() {
+    fn a_tip_touching_a_particle_is_detected_and_one_under_a_patch_is_not() {
         let apex = [250.0, 100.0];
         let mut tracker = needle_tracker(apex);
-        let touched = |level: u8| {
+        let touched = |level: u8, centre: [f64; 2], r: f64| {
             let mut frame = needle(0.0, apex, 4.0, 2);
             for (x, y, p) in frame.enumerate_pixels_mut() {
                 let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
-                if p[0] < 120 && (dx + 8.0).hypot(dy + 5.0) <= 8.0 {
+                if p[0] < 120 && (dx - centre[0]).hypot(dy - centre[1]) <= r {
                     p[0] = level;
                 }
             }
             frame
         };
-        let e = tracker.track(&touched(250));
-        assert!(e.detected, "{e:?}");
-        assert!((e.angle_deg.unwrap()).abs() < 0.05, "{e:?}");
-        let e = tracker.track(&touched(180));
+        for level in [250, 180] {
+            let e = tracker.track(&touched(level, [-8.0, -5.0], 8.0));
+            assert!(e.detected, "{level}: {e:?}");
+            assert!((e.angle_deg.unwrap()).abs() < 0.05, "{level}: {e:?}");
+        }
+        let e = tracker.track(&touched(180, [-4.0, -6.0], 10.0));
         assert_eq!(
             e.miss,
             Some(Miss::EdgeMissing(EdgeName::intern("upper"))),
