@@ -65,6 +65,33 @@ pub fn principal_axis(pts: &[[f64; 2]]) -> ([f64; 2], f64, f64) {
     (c, 0.5 * (2.0 * sxy).atan2(sxx - syy), sxx + syy)
 }
 
+/// The mean of `read` over a strip reaching from `from` along the unit vector `dir`:
+/// `rows` rows one pixel apart, each of `2 * half + 1` samples one pixel apart across
+/// `dir`, centred on its axis; `None` when no sample reads (the strip out of the
+/// frame).
+pub fn strip_mean(
+    from: [f64; 2],
+    dir: [f64; 2],
+    rows: usize,
+    half: i32,
+    read: impl Fn([f64; 2]) -> Option<f64>,
+) -> Option<f64> {
+    let side = [-dir[1], dir[0]];
+    let (mut sum, mut n) = (0.0, 0usize);
+    for d in 0..rows {
+        for j in -half..=half {
+            if let Some(v) = read(add(
+                add(from, scale(dir, d as f64)),
+                scale(side, f64::from(j)),
+            )) {
+                sum += v;
+                n += 1;
+            }
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
 /// Bilinear grey level of `img` at `p`, `None` outside its pixel centres.
 pub fn bilinear(img: &image::GrayImage, p: [f64; 2]) -> Option<f64> {
     let (w, h) = (img.width() as usize, img.height() as usize);

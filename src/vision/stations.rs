@@ -27,7 +27,7 @@
 
 use image::GrayImage;
 
-use super::geometry::{add, clip_to_rect, dot, norm, scale, sub, Line};
+use super::geometry::{add, clip_to_rect, dot, norm, scale, strip_mean, sub, Line};
 use super::template::{Pose, Template, BLUE, GREEN, RED};
 use super::{Edge, Miss};
 
@@ -552,7 +552,10 @@ pub fn check_edges(
 /// (rendered suites 1-15 and 31, real-background seeds 5, 7, 9, 13, 21-24 and 71)
 /// leaves at most 0.57 there; the tips under a patch at the probe's level that
 /// passed without this check (adversarial seeds 4242, 7, 99, 11 and 12) 0.8-1.3.
-const COVERED_APEX_SHARE: f64 = 0.5;
+/// The rigid engine reads its tips past the apex with the same rule.
+pub(super) const COVERED_APEX_SHARE: f64 = 0.5;
+/// Half the width of the strip read past the apex, pixels (five pixels wide).
+pub(super) const PAST_APEX_HALF_PX: i32 = 2;
 
 /// Whether the apex lies under a body at the probe's level: beyond it, along the
 /// outward bisector of the faces (from the blurred corner on, the inside sample's
@@ -573,7 +576,6 @@ fn apex_covered(
         return false;
     }
     let out = scale(inward, -1.0 / len);
-    let side = [-out[1], out[0]];
     let (mut probe, mut around, mut n) = (0.0, 0.0, 0usize);
     for (_, p, _) in faces.iter().flatten() {
         for k in (0..p.stations).filter(|&k| p.held(k)) {
@@ -582,26 +584,16 @@ fn apex_covered(
             n += 1;
         }
     }
-    let (mut beyond, mut m) = (0.0, 0usize);
-    let from = s.margin_px + 1.0;
-    for d in 0..=s.inside_px.max(3.0).round() as i64 {
-        for j in -2..=2 {
-            let q = add(
-                add(pose.apex, scale(out, from + d as f64)),
-                scale(side, j as f64),
-            );
-            if let Some(v) = grey(frame, q) {
-                beyond += v;
-                m += 1;
-            }
-        }
-    }
-    if n == 0 || m == 0 {
+    if n == 0 {
         return false;
     }
+    let rows = s.inside_px.max(3.0).round() as usize + 1;
+    let from = add(pose.apex, scale(out, s.margin_px + 1.0));
+    let Some(beyond) = strip_mean(from, out, rows, PAST_APEX_HALF_PX, |q| grey(frame, q)) else {
+        return false;
+    };
     let (probe, around) = (probe / n as f64, around / n as f64);
-    let share = (beyond / m as f64 - around) / (probe - around);
-    share > COVERED_APEX_SHARE
+    (beyond - around) / (probe - around) > COVERED_APEX_SHARE
 }
 
 /// A beam edge looked for over every scale ([`beam_edge_scale`]) is taken where its

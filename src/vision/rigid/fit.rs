@@ -19,7 +19,8 @@ use nalgebra::{Matrix4, Vector4};
 
 use super::station::{Located, Stations};
 use super::{Bounds, Pose, RigidTemplate};
-use crate::vision::geometry::{add, bilinear, dot, rotate, scale, sub};
+use crate::vision::geometry::{add, bilinear, dot, rotate, scale, strip_mean, sub};
+use crate::vision::stations::{COVERED_APEX_SHARE, PAST_APEX_HALF_PX};
 use crate::vision::Miss;
 
 /// Most edges a rigid template may have.
@@ -85,10 +86,6 @@ const SIGMA_FACTOR: f64 = 1.2;
 /// dark lever's end) shows no step there.
 const APEX_STATIONS: usize = 3;
 const NEAREST_PX: f64 = 3.0;
-/// Past the apex, a level this share of the way from the surroundings' to the
-/// probe's is a body over the tip (docs/tracker.md, "What the tracker refuses, and
-/// why").
-const COVERED_APEX_SHARE: f64 = 0.5;
 /// A corner station's inside within this share of the calibrated step of the probe's
 /// level carries the probe on.
 const COVERED_LEVEL: f64 = 0.25;
@@ -577,21 +574,7 @@ impl Fitter {
         // The mean level over a square of five pixels a side whose near side's centre
         // lies at `from`, reaching along `dir`.
         let level = |from: [f64; 2], dir: [f64; 2]| {
-            let side = [-dir[1], dir[0]];
-            let (mut sum, mut m) = (0.0, 0usize);
-            for d in 0..5 {
-                for j in -2..=2 {
-                    let q = add(
-                        add(from, scale(dir, f64::from(d))),
-                        scale(side, f64::from(j)),
-                    );
-                    if let Some(v) = bilinear(frame, q) {
-                        sum += v;
-                        m += 1;
-                    }
-                }
-            }
-            (m > 0).then(|| sum / m as f64)
+            strip_mean(from, dir, 5, PAST_APEX_HALF_PX, |q| bilinear(frame, q))
         };
         let edge = &t.edges[hidden];
         let inside = normal(hidden);
