@@ -539,7 +539,16 @@ pub fn check_edges(
     // Last, as the dearest: a face the frame shows turned from its prediction.
     for (e, face) in faces.iter().enumerate() {
         if let Some((span, p, partner)) = face {
-            if turned_face(frame, &t.line(pose, e), *span, partner.as_ref(), &s, p) {
+            let other = if e == BLUE { GREEN } else { BLUE };
+            if turned_face(
+                frame,
+                &t.line(pose, e),
+                *span,
+                partner.as_ref(),
+                &s,
+                p,
+                shown_step[other],
+            ) {
                 return Some(Miss::EdgeMissing(Edge::ALL[e].into()));
             }
         }
@@ -808,8 +817,12 @@ fn shown(p: &Profile) -> f64 {
 /// straight step turned from it by [`FACE_TURN_DEG`] or more: a pyramid of other face
 /// angles, placed where its other edges fit. Such a face crosses the predicted line,
 /// so its stations fade toward both ends, which the per-station threshold alone lets
-/// pass. Each station locates the step within [`FACE_SEARCH_PX`] of the prediction;
-/// the located steps are that face when at least [`HELD_SHARE`] of the stations
+/// pass. Each station locates the step within [`FACE_SEARCH_PX`] of the prediction,
+/// where it reaches [`LOCATED_RATIO`] of the step its partner face shows along its
+/// length (`shown_by_partner`, taken between [`END_SHOWN_MIN`] and 1: a probe drawn
+/// fainter than calibrated, under harsh noise at low magnification, shows about half
+/// its step, and its turned face no more); the located steps are that face when at
+/// least [`HELD_SHARE`] of the stations
 /// locate one, they lie on one line within [`FACE_LINE_PX`], that line is turned, and
 /// it shows more of the step than the predicted one. Looked at for every face whose
 /// corner is in view, fitted or not: the fit turns the faces together, so a face of
@@ -823,6 +836,7 @@ fn turned_face(
     partner: Option<&Line>,
     s: &Sampling,
     predicted: &Profile,
+    shown_by_partner: f64,
 ) -> bool {
     let before = shown(predicted);
     if before + TURNED_ROOM > STATIONS as f64 {
@@ -830,11 +844,12 @@ fn turned_face(
     }
     let len = norm(sub(b, a));
     let best = locate_steps(frame, line, (a, b), s, predicted.step);
+    let located_ratio = LOCATED_RATIO * shown_by_partner.clamp(END_SHOWN_MIN, 1.0);
     // (position along the face, offset of the located step), pixels.
     let mut located = [[0.0; 2]; STATIONS];
     let mut n = 0;
     for (i, &(r, k)) in best.iter().enumerate() {
-        if r >= LOCATED_RATIO {
+        if r >= located_ratio {
             located[n] = [(i as f64 + 0.5) / STATIONS as f64 * len, k];
             n += 1;
         }
@@ -1549,9 +1564,35 @@ mod tests {
             let (line, span) = predicted(deg);
             let p = profile(&frame, &line, span, None, &s, 150.0);
             assert_eq!(
-                turned_face(&frame, &line, span, None, &s, &p),
+                turned_face(&frame, &line, span, None, &s, &p, 1.0),
                 turned,
                 "predicted {deg} deg off"
+            );
+        }
+    }
+
+    #[test]
+    fn a_faint_face_is_told_turned_at_the_step_its_partner_shows() {
+        // The probe drawn at 0.4 of its calibrated step: a face 12 deg off locates
+        // its step at half of what the partner face shows, not at half the
+        // calibrated step, which no station reaches.
+        let frame = GrayImage::from_fn(200, 200, |x, _| {
+            image::Luma([if x > 100 { 110 } else { 50 }])
+        });
+        let s = Sampling::new(1.0, 20.0);
+        for (deg, partner, turned) in [
+            (12.0, 0.4, true),
+            (-12.0, 0.4, true),
+            (12.0, 1.0, false),
+            (0.0, 0.4, false),
+            (3.0, 0.4, false),
+        ] {
+            let (line, span) = predicted(deg);
+            let p = profile(&frame, &line, span, None, &s, 150.0);
+            assert_eq!(
+                turned_face(&frame, &line, span, None, &s, &p, partner),
+                turned,
+                "predicted {deg} deg off, partner showing {partner}"
             );
         }
     }
