@@ -4,7 +4,8 @@
 //! frame. Each probe is scored against its own truth, as `replay` writes its own CSV:
 //! detection, no detection while it is out of view (the other probes still in it), no
 //! tip placed on another probe, and the rendered suite's accuracy. One set pairs an AFM
-//! cantilever with a rigid tool (a needle, a tipless lever, a gripper jaw).
+//! cantilever with a rigid tool (a needle, a tipless lever, a gripper jaw), another
+//! two rigid tools.
 //!
 //! The seeds are generated; `PROBES_SEED=n` runs another (the thresholds were set on 3,
 //! 5 and 8 and checked on the held-out 11). Run with `cargo test --release --test
@@ -261,6 +262,68 @@ fn a_cantilever_beside_a_rigid_tool_is_tracked_with_it() {
         assert!(afm.detect_rate >= 0.975, "{why}");
         assert!(afm.angle_err_median_deg <= 0.025, "{why}");
         assert!(afm.angle_err_p95_deg <= 0.13, "{why}");
+    }
+}
+
+#[test]
+fn two_rigid_tools_are_tracked_in_one_view() {
+    // A needle and a gripper jaw, a jaw and a tipless lever, a lever and a needle:
+    // each tool is tracked as a probe of one set, neither is found while out of view
+    // (the other still in it), and each loses at most 1 % of its frames against the
+    // same frames with the other out of view. The bounds were set on seeds 3, 5 and 8
+    // (at most one frame lost, 96.8 % the least detected) and checked on the
+    // held-out 11 (docs/tracker.md, "Several probes in one view").
+    let pairs = [
+        [ToolKind::Needle, ToolKind::Gripper],
+        [ToolKind::Gripper, ToolKind::Tipless],
+        [ToolKind::Tipless, ToolKind::Needle],
+    ];
+    for kinds in pairs {
+        let session = Session::two_tools(kinds, seed(3), 300);
+        let mut set = ProbeSet::new(trackers(&session), &[0, 0]);
+        let mut alone = trackers(&session);
+        let mut frame = GrayImage::new(1, 1);
+        let mut estimates = vec![Estimate::default(); 2];
+        let mut truths = [Vec::new(), Vec::new()];
+        let mut found = [Vec::new(), Vec::new()];
+        let mut found_alone = [Vec::new(), Vec::new()];
+        for (i, spec) in session.frames.iter().enumerate() {
+            render_tool_into(spec, &[], &mut frame);
+            set.track(&frame, &mut estimates);
+            for k in 0..2 {
+                truths[k].push(tool_truth_of(i, &spec.nth_probe(k).expect("placed")));
+                found[k].push(estimates[k]);
+                // The same frame with only this tool in view.
+                let mut only = *spec;
+                if k == 0 {
+                    only.others.iter_mut().for_each(|o| o.blank = true);
+                } else {
+                    only.blank = true;
+                }
+                render_into(&only, &mut frame);
+                found_alone[k].push(alone[k].track(&frame));
+            }
+        }
+        for k in 0..2 {
+            let (both, lone) = (
+                score(&truths[k], &found[k]),
+                score(&truths[k], &found_alone[k]),
+            );
+            let why = format!(
+                "{} beside {}: {both:?}\nalone {lone:?}",
+                kinds[k].name(),
+                kinds[1 - k].name()
+            );
+            println!("{why}");
+            assert!(
+                both.positives > 150 && both.frames - both.positives > 50,
+                "{why}"
+            );
+            assert_eq!(both.false_detections, 0, "{why}");
+            assert!(both.detect_rate >= lone.detect_rate - 0.01, "{why}");
+            assert!(both.detect_rate >= 0.95, "{why}");
+            assert!(both.angle_err_median_deg <= 0.035, "{why}");
+        }
     }
 }
 

@@ -7,6 +7,7 @@ use super::geometry::{probe_outline, Entry};
 use super::rng::{sub_seed, Rng};
 use super::session::{Session, Setup, FRAME_RATE_HZ, MAGNIFICATIONS};
 use super::spec::{FrameSpec, Look, Others, Placement, Style};
+use super::tool::tool_outline;
 use super::tool_shape::{ToolGeometry, ToolKind};
 use crate::vision::{Threshold, DEFAULT_WINDOW_DEG};
 
@@ -182,6 +183,19 @@ impl Session {
     /// others its [`FrameSpec::others`]; the files are named as
     /// [`Session::probe_names`].
     pub fn several(seed: u64, count: usize, n: usize, width: u32, height: u32) -> Session {
+        Session::several_of(seed, &vec![None; count], n, width, height)
+    }
+
+    /// As [`Session::several`], probe `k` drawn as `tools[k]` where that is a tool
+    /// (kept clear of the others by its own outline) and as a cantilever where not.
+    pub fn several_of(
+        seed: u64,
+        tools: &[Option<ToolGeometry>],
+        n: usize,
+        width: u32,
+        height: u32,
+    ) -> Session {
+        let count = tools.len();
         assert!((2..=SLOTS.len()).contains(&count), "2 to 4 probes");
         let mut rng = Rng::new(sub_seed(seed, 5));
         let setups: Vec<(Setup, [f64; 2], [f64; 2])> = SLOTS[..count]
@@ -206,6 +220,7 @@ impl Session {
                     rng.uniform(ys[0], ys[1]) * f64::from(height),
                 ],
                 blank: rng.chance(BLANK_FRACTION),
+                tool: tools[k],
             }
         };
         let with = |spec: FrameSpec, places: &[Placement]| FrameSpec {
@@ -285,24 +300,49 @@ const NEEDLE_END_ZOOM: f64 = 2.0;
 /// Its flanks' bowed span there, micrometres: past the border of every frame.
 const LONG_FLANK_UM: f64 = 1000.0;
 
+/// A random tool of `kind` as the views of several probes show it: a needle's end
+/// zoomed, its flanks running out of the frame.
+fn framed_tool(kind: ToolKind, seed: u64) -> ToolGeometry {
+    let mut tool = ToolGeometry::random(kind, seed);
+    if kind == ToolKind::Needle {
+        tool.end_um *= NEEDLE_END_ZOOM;
+    }
+    for flank in &mut tool.flanks {
+        flank.span_um = LONG_FLANK_UM;
+    }
+    tool
+}
+
 impl Session {
     /// `n` of [`Session::several`]'s two-probe 640x480 frames whose first probe is a
     /// rigid tool of `kind` (its flanks running out of the frame), out of view in
     /// [`TOOL_OUT_OF_VIEW`] of the frames, beside the second, an AFM cantilever.
     pub fn tool_beside_a_cantilever(kind: ToolKind, seed: u64, n: usize) -> Session {
         let mut session = Session::several(seed, 2, n, 640, 480);
-        let mut tool = ToolGeometry::random(kind, sub_seed(seed, 60));
-        if kind == ToolKind::Needle {
-            tool.end_um *= NEEDLE_END_ZOOM;
-        }
-        for flank in &mut tool.flanks {
-            flank.span_um = LONG_FLANK_UM;
-        }
+        let tool = framed_tool(kind, sub_seed(seed, 60));
         session.reference.tool = Some(tool);
         let mut rng = Rng::new(sub_seed(seed, 61));
         for frame in &mut session.frames {
             frame.tool = Some(tool);
             frame.blank |= rng.chance(TOOL_OUT_OF_VIEW);
+        }
+        session
+    }
+
+    /// `n` of [`Session::several`]'s two-probe 640x480 frames whose probes are rigid
+    /// tools of `kinds` (kept clear of each other by their own outlines), each out of
+    /// view in [`TOOL_OUT_OF_VIEW`] of the frames.
+    pub fn two_tools(kinds: [ToolKind; 2], seed: u64, n: usize) -> Session {
+        let tools: Vec<Option<ToolGeometry>> = (0..2)
+            .map(|k| Some(framed_tool(kinds[k], sub_seed(seed, 60 + k as u64))))
+            .collect();
+        let mut session = Session::several_of(seed, &tools, n, 640, 480);
+        let mut rng = Rng::new(sub_seed(seed, 61));
+        for frame in &mut session.frames {
+            frame.blank |= rng.chance(TOOL_OUT_OF_VIEW);
+            for other in frame.others.iter_mut() {
+                other.blank |= rng.chance(TOOL_OUT_OF_VIEW);
+            }
         }
         session
     }
@@ -337,7 +377,12 @@ fn bounds(spec: &FrameSpec, outline: &mut Vec<[f64; 2]>) -> Bounds {
     if spec.blank {
         return empty;
     }
-    probe_outline(&spec.probe, &spec.pose(), spec.width, spec.height, outline);
+    match &spec.tool {
+        Some(tool) => tool_outline(tool, &spec.pose(), spec.width, spec.height, outline),
+        None => {
+            probe_outline(&spec.probe, &spec.pose(), spec.width, spec.height, outline);
+        }
+    }
     let (w, h) = (f64::from(spec.width), f64::from(spec.height));
     outline
         .iter()

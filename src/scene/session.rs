@@ -133,20 +133,18 @@ impl Session {
 
     /// A tracker for each probe of the reference, in order, calibrated on the rendered
     /// reference with [`Session::tracker_config_of`] and forces from its geometry: the
-    /// trackers `replay` builds from the session's probe.toml. A tool (probe 0 only) is
-    /// calibrated from [`tool_clicks`], over the scales of the session's frames (10 %
+    /// trackers `replay` builds from the session's probe.toml. A tool is calibrated
+    /// from [`tool_clicks`], over the scales of the session's frames (10 %
     /// to spare, as a lab states them), without a cantilever.
     pub fn trackers(&self) -> Result<Vec<Tracker>, VisionError> {
         let mut reference = GrayImage::new(1, 1);
         Renderer::new().render_into(&self.reference, &mut reference);
         (0..self.reference.probe_count())
             .map(|k| {
-                if let Some(tool) = self.reference.tool.filter(|_| k == 0) {
-                    let template = calibrate_rigid(
-                        &reference,
-                        &tool_clicks(&self.reference),
-                        tool.kind.apex_edges(),
-                    )?;
+                let own = self.reference.nth_probe(k).unwrap_or(self.reference);
+                if let Some(tool) = own.tool {
+                    let template =
+                        calibrate_rigid(&reference, &tool_clicks(&own), tool.kind.apex_edges())?;
                     let cfg = TrackerConfig {
                         threshold: self.threshold,
                         window_deg: self.window_deg,

@@ -211,6 +211,8 @@ pub struct Placement {
     pub apex_px: [f64; 2],
     /// Out of view in this frame.
     pub blank: bool,
+    /// A rigid tool drawn instead of the cantilever ([`FrameSpec::tool`]).
+    pub tool: Option<ToolGeometry>,
 }
 
 impl FrameSpec {
@@ -245,6 +247,7 @@ impl FrameSpec {
             angle_deg: self.angle_deg,
             apex_px: self.apex_px,
             blank: self.blank,
+            tool: self.tool,
         }
     }
 
@@ -255,21 +258,20 @@ impl FrameSpec {
 
     /// Probe `k` of the frame (0: its own, then the others in order) as a frame of that
     /// probe alone, with this frame's size, magnification, look and seed; its truth is
-    /// [`crate::scene::truth_of`] of it. The others are cantilevers: only probe 0 may be
-    /// a tool.
+    /// [`crate::scene::truth_of`] of it ([`crate::scene::tool_truth`] for a tool).
     pub fn nth_probe(&self, k: usize) -> Option<FrameSpec> {
-        let (place, tool) = match k {
-            0 => (self.placement(), self.tool),
-            k => (*self.others.iter().nth(k - 1)?, None),
+        let place = match k {
+            0 => self.placement(),
+            k => *self.others.iter().nth(k - 1)?,
         };
         Some(FrameSpec {
             others: Others::NONE,
-            tool,
             ..self.placing(place)
         })
     }
 
-    /// This frame with its own (first) probe placed as `place`; the others stay.
+    /// This frame with its own (first) probe placed as `place` (a tool if `place`
+    /// is one); the others stay.
     pub fn placing(&self, place: Placement) -> FrameSpec {
         FrameSpec {
             probe: place.probe,
@@ -278,6 +280,7 @@ impl FrameSpec {
             angle_deg: place.angle_deg,
             apex_px: place.apex_px,
             blank: place.blank,
+            tool: place.tool,
             ..*self
         }
     }

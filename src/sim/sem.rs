@@ -98,6 +98,7 @@ impl ProbeView {
                 (ax * w + lateral.x * ppu).clamp((ax - left) * w, (ax + right) * w),
                 (ay * h - gap_um * ppu).clamp((ay - 0.25) * h, (ay + 0.2) * h),
             ],
+            tool: None,
             blank: false,
         };
         let truth = FrameTruth {
@@ -230,6 +231,7 @@ impl SemScene {
                 angle_deg: 0.0,
                 apex_px: [p.place.apex_at[0] * w, p.place.apex_at[1] * h],
                 blank: false,
+                tool: None,
             };
             let others: Vec<Placement> = self.probes[1..].iter().map(place).collect();
             reference = FrameSpec {
