@@ -271,7 +271,7 @@ fn two_rigid_tools_are_tracked_in_one_view() {
     // each tool is tracked as a probe of one set, neither is found while out of view
     // (the other still in it), and each loses at most 1 % of its frames against the
     // same frames with the other out of view. The bounds were set on seeds 3, 5 and 8
-    // (at most one frame lost, 96.8 % the least detected) and checked on the
+    // (at most one frame lost, 97.2 % the least detected) and checked on the
     // held-out 11 (docs/tracker.md, "Several probes in one view").
     let pairs = [
         [ToolKind::Needle, ToolKind::Gripper],

@@ -48,8 +48,16 @@ const CORNER_PX: f64 = 3.0;
 /// A station enters the fit when it steps by this share of the calibrated step.
 const FIT_SHARE: f64 = 0.2;
 /// A station holds the edge when it steps by this share of the calibrated step within
-/// this distance of the fitted line.
-const HOLD_SHARE: f64 = 0.2;
+/// [`HELD_PX`] of the fitted line, as an AFM pyramid's station shows its edge: a
+/// hidden or absent edge steps by nothing, and an end face over a band of a real
+/// background nearly as bright as the probe by 0.15-0.25.
+const HOLD_SHARE: f64 = 0.1;
+/// A station steps as its edge does, while the fit converges and at the apex's
+/// corner, when it steps by this share of the calibrated step: the corner tells a
+/// tip from a body that only looks like it, and asking [`HOLD_SHARE`] there let a
+/// dark lever's template through on the dark gap of a rail in a real background
+/// (tool seed 7).
+const STEP_SHARE: f64 = 0.2;
 const HELD_PX: f64 = 1.5;
 /// The levels on the probe's side of its edges in view lie within this share of the
 /// smallest calibrated step: one body.
@@ -339,7 +347,7 @@ impl Fitter {
     /// within the reach), and stations in view.
     fn held(&self) -> (usize, usize) {
         let in_view = self.points.iter().filter(|p| p.in_view);
-        let held = in_view.clone().filter(|p| p.step >= HOLD_SHARE).count();
+        let held = in_view.clone().filter(|p| p.step >= STEP_SHARE).count();
         (held, in_view.count())
     }
 
@@ -591,19 +599,16 @@ impl Fitter {
         carries_on && past.is_some_and(|v| (v - around) / (probe - around) < COVERED_APEX_SHARE)
     }
 
+    /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
+    /// within [`HELD_PX`] of it.
     fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
-        Self::steps_within(t, pose, p, HELD_PX)
+        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
     }
 
-    /// Station `p` steps by [`HOLD_SHARE`] of its edge's step within `px` of the edge.
-    fn steps_within(t: &RigidTemplate, pose: &Pose, p: &Point, px: f64) -> bool {
-        Self::step_off(t, pose, p) <= px
-    }
-
-    /// How far from the edge station `p` steps by [`HOLD_SHARE`] of its edge's step,
+    /// How far from the edge station `p` steps by [`STEP_SHARE`] of its edge's step,
     /// pixels (infinity where it does not).
     fn step_off(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
-        if p.in_view && p.step >= HOLD_SHARE {
+        if p.in_view && p.step >= STEP_SHARE {
             Self::residual(t, pose, p).abs()
         } else {
             f64::INFINITY
@@ -653,7 +658,7 @@ impl Fitter {
     }
 
     /// How far from the line station `p` shows its edge, pixels (infinity where it
-    /// does not): where it steps as the edge does by [`HOLD_SHARE`] of the calibrated
+    /// does not): where it steps as the edge does by [`STEP_SHARE`] of the calibrated
     /// step, or, beyond [`HELD_PX`], where it steps the other way by as much against a
     /// neighbour brighter than the probe where the probe is the brighter (darker where
     /// it is darker): the tip's outline where it touches a particle.
