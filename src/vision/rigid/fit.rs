@@ -602,13 +602,19 @@ impl Fitter {
     /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
     /// within [`HELD_PX`] of it.
     fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
-        p.in_view && p.step >= HOLD_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX
+        Self::off_at(t, pose, p, HOLD_SHARE) <= HELD_PX
     }
 
     /// How far from the edge station `p` steps by [`STEP_SHARE`] of its edge's step,
     /// pixels (infinity where it does not).
     fn step_off(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
-        if p.in_view && p.step >= STEP_SHARE {
+        Self::off_at(t, pose, p, STEP_SHARE)
+    }
+
+    /// How far from the edge station `p` steps by `share` of its edge's step, pixels
+    /// (infinity where it does not, or is out of view).
+    fn off_at(t: &RigidTemplate, pose: &Pose, p: &Point, share: f64) -> f64 {
+        if p.in_view && p.step >= share {
             Self::residual(t, pose, p).abs()
         } else {
             f64::INFINITY
