@@ -107,21 +107,30 @@ fn a_recorded_live_run_replays_to_the_same_estimates() {
     assert_reproduced(&session.join("estimates.csv"), &replayed_csv, 120);
 }
 
-/// A live run of two probes (config/sim-two-probes.toml) replays to each probe's live
-/// estimates: `estimates.<name>.csv` against the replay's `<csv>.<name>.csv`.
+/// A live run of two probes replays to each probe's live estimates:
+/// `estimates.<name>.csv` against the replay's `<csv>.<name>.csv`. Two cantilevers
+/// (config/sim-two-probes.toml), and a cantilever beside a rigid needle
+/// (config/sim-needle.toml: the needle's tracker calibrated as a named-edge template).
 #[test]
 fn a_recorded_run_of_two_probes_replays_to_each_probe_s_estimates() {
-    let state = tempfile::tempdir().unwrap();
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml");
-    let session = record_run_with(state.path(), "3", &["--config", config.to_str().unwrap()]);
-    let err = replay(&session, &state.path().join("replayed.csv"), &[]);
-    assert!(err.contains("left") && err.contains("right"), "{err}");
-    for name in ["left", "right"] {
-        assert_reproduced(
-            &session.join(format!("estimates.{name}.csv")),
-            &state.path().join(format!("replayed.{name}.csv")),
-            60,
-        );
+    for (file, names) in [
+        ("sim-two-probes.toml", ["left", "right"]),
+        ("sim-needle.toml", ["lever", "needle"]),
+    ] {
+        let state = tempfile::tempdir().unwrap();
+        let config = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("config")
+            .join(file);
+        let session = record_run_with(state.path(), "3", &["--config", config.to_str().unwrap()]);
+        let err = replay(&session, &state.path().join("replayed.csv"), &[]);
+        assert!(names.iter().all(|name| err.contains(name)), "{file}: {err}");
+        for name in names {
+            assert_reproduced(
+                &session.join(format!("estimates.{name}.csv")),
+                &state.path().join(format!("replayed.{name}.csv")),
+                60,
+            );
+        }
     }
 }
 

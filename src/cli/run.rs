@@ -35,7 +35,8 @@ sends the S100 its rate command. Without --config the built-in simulated lab run
 Several probes ([[probe]] entries, config/probe.example.toml): each rides its own S100 \
 positioner and is tracked in every frame; the stylus drives and feels one at a time, and \
 its second button switches to the next (motion waits for the re-centred stylus). \
-config/sim-two-probes.toml is the simulated lab of two.\n\n\
+config/sim-two-probes.toml is the simulated lab of two; config/sim-needle.toml puts a \
+rigid needle (tracked, no force) beside the cantilever.\n\n\
 Signals: SIGINT or SIGTERM stop cleanly with the outputs at zero; SIGQUIT, SIGABRT \
 (systemd's watchdog), SIGUSR1, SIGUSR2, SIGALRM and SIGXCPU stop the same way and exit \
 with 128 + the signal's number. SIGHUP reloads the [teleop] and [safety] gains from the \
@@ -51,6 +52,7 @@ directory.",
     after_help = "Examples:\n  nanoforce run                                  # the simulated lab\n  \
 nanoforce run --duration-s 30 --stats-json stats.json\n  \
 nanoforce run --config config/sim-two-probes.toml  # two probes, two positioners\n  \
+nanoforce run --config config/sim-needle.toml      # a cantilever beside a needle\n  \
 nanoforce run --config /etc/nanoforce/nanoforce.toml"
 )]
 pub struct RunArgs {

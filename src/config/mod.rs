@@ -667,6 +667,7 @@ window_deg = 10
 
     #[test]
     fn probe_feel_and_place_are_checked() {
+        use crate::scene::ToolKind;
         for (sim, expected) in [
             (
                 "entry = \"top\"",
@@ -680,11 +681,36 @@ window_deg = 10
                 "start_um = -3",
                 "probe[1].sim.start_um = -3 is out of range",
             ),
+            (
+                "tool = \"scalpel\"",
+                "probe[1].sim.tool must be \"needle\", \"tipless\" or \"gripper\", got \"scalpel\"",
+            ),
         ] {
             let with = format!("window_deg = 10\n[probe.sim]\n{sim}");
             let msg = error_of(&TWO.replace("window_deg = 10", &with));
             assert!(msg.contains(expected), "{msg}");
         }
+        // A rigid tool in the simulated view: drawn without a cantilever, so never with one.
+        let tool = TWO.replace(
+            "window_deg = 10",
+            "window_deg = 10\n[probe.sim]\ntool = \"gripper\"",
+        );
+        assert_eq!(
+            parse(&tool).unwrap().probes[1].sim.tool,
+            Some(ToolKind::Gripper)
+        );
+        assert_eq!(parse(TWO).unwrap().probes[1].sim.tool, None);
+        let msg = error_of(&TWO.replace(
+            "threshold = 120",
+            "threshold = 120\n[probe.sim]\ntool = \"needle\"",
+        ));
+        assert!(
+            msg.contains(
+                "probe[0].sim.tool must not be given with a [cantilever]: a rigid tool is drawn \
+                 without one, got \"needle\""
+            ),
+            "{msg}"
+        );
         let msg = error_of(&TWO.replace("name = \"needle\"", "name = \"needle\"\nfelt = true"));
         assert!(
             msg.contains("probe[1].felt needs the probe's [cantilever]"),

@@ -276,13 +276,21 @@ impl Section<'_> {
             Some(s) if s == 1.0 || s == -1.0 => Some(s),
             Some(s) => return Err(self.invalid("pressing_force_sign", s, "must be 1 or -1")),
         };
+        let sim = SimProbe::validate(raw.sim, &self.prefix, k, count, self.check)?;
+        if let (Some(tool), Some(_)) = (sim.tool, cantilever) {
+            return Err(self.invalid(
+                "sim.tool",
+                format_args!("{:?}", tool.name()),
+                "must not be given with a [cantilever]: a rigid tool is drawn without one",
+            ));
+        }
         Ok(ProbeConfig {
             name,
             cantilever,
             tracker,
             felt,
             pressing_force_sign,
-            sim: SimProbe::validate(raw.sim, &self.prefix, k, count, self.check)?,
+            sim,
             prefix: self.prefix.clone(),
         })
     }

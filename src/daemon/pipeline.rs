@@ -221,17 +221,18 @@ pub fn run_tracker(
                 report.detected += 1;
             }
             let truth = truth.filter(|t| t.probe_in_view);
-            if let Some(truth) = truth {
+            let true_force_nn = truth.and_then(|t| t.force_nn);
+            if let Some(true_nn) = true_force_nn {
                 let errors = report.force.get_or_insert_with(ForceErrors::default);
-                errors.record_truth(truth.force_nn);
+                errors.record_truth(true_nn);
                 if let Some(force_nn) = p.estimate.felt_force_nn() {
-                    errors.record_error(force_nn, truth.force_nn);
+                    errors.record_error(force_nn, true_nn);
                 }
             }
             let _ = side.telemetry.push(EstimateRecord {
                 estimate: *p,
                 processing_ms: (published_s - started_s) * 1e3,
-                true_force_nn: truth.map(|t| t.force_nn),
+                true_force_nn,
             });
         }
     }

@@ -7,7 +7,7 @@ use super::contact::SampleParams;
 use super::operator::OperatorParams;
 use super::stage::StageParams;
 use crate::checks::{Checker, ConfigError, List, Range};
-use crate::scene::Entry;
+use crate::scene::{Entry, ToolKind};
 
 // The accepted ranges, documented with the same words in config/sim.toml: a simulated
 // lab that stays a lab (an S100-like stage, an SEM, a person's hand).
@@ -106,6 +106,7 @@ pub(crate) struct RawSimProbe {
     entry: Option<String>,
     apex_at: Option<List<f64, 2>>,
     start_um: Option<f64>,
+    tool: Option<String>,
 }
 
 /// One probe in the simulated lab: where the SEM shows it and where its positioner
@@ -120,6 +121,9 @@ pub struct SimProbe {
     /// Its positioner's start: this far along the press direction, um. First contact is
     /// at `[sim.sample] contact_at_um`; a start past it holds a steady contact.
     pub start_um: f64,
+    /// A rigid tool drawn in the cantilever's stead (a probe without `[cantilever]`):
+    /// it hangs where `apex_at` puts its tip and moves with its positioner, unbent.
+    pub tool: Option<ToolKind>,
 }
 
 /// Where the simulated SEM shows a lone probe, and each of several (two face each
@@ -167,10 +171,26 @@ impl SimProbe {
                 check.number(&format!("{}[1]", key("apex_at")), y, APEX_AT)?,
             ],
         };
+        let tool = match raw.tool.as_deref() {
+            None => None,
+            Some(name) => Some(
+                ToolKind::ALL
+                    .into_iter()
+                    .find(|kind| kind.name() == name)
+                    .ok_or_else(|| {
+                        check.invalid(
+                            &key("tool"),
+                            format_args!("{name:?}"),
+                            "must be \"needle\", \"tipless\" or \"gripper\"",
+                        )
+                    })?,
+            ),
+        };
         Ok(SimProbe {
             entry,
             apex_at,
             start_um: check.number_or(&key("start_um"), raw.start_um, 0.0, START_UM)?,
+            tool,
         })
     }
 }

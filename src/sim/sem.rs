@@ -11,8 +11,8 @@ use super::contact::{Bending, Contact};
 use crate::hw::frames::{FrameTruth, MAX_TRUTHS, NO_TRUTH};
 use crate::model::Cantilever;
 use crate::scene::{
-    self, Entry, FrameSpec, Others, Placement, ProbeGeometry, Session, Setup, Style,
-    MAX_OTHER_PROBES,
+    self, tool_clicks, Entry, FrameSpec, Others, Placement, ProbeGeometry, Session, Setup, Style,
+    ToolGeometry, MAX_OTHER_PROBES,
 };
 use crate::vision::{CalibrationConfig, Threshold};
 
@@ -71,9 +71,34 @@ impl ProbeView {
         }
     }
 
+    /// The rigid tool drawn in the cantilever's stead, if it is one.
+    fn tool(&self) -> Option<ToolGeometry> {
+        self.place.tool.map(ToolGeometry::typical)
+    }
+
+    /// Where it stands at rest in a `width` x `height` view, unbent: the reference's
+    /// placement.
+    fn at_rest(&self, width: f64, height: f64) -> Placement {
+        Placement {
+            probe: self.setup.probe,
+            entry: self.setup.entry,
+            base_deg: self.setup.base_deg,
+            angle_deg: 0.0,
+            apex_px: [
+                self.place.apex_at[0] * width,
+                self.place.apex_at[1] * height,
+            ],
+            blank: false,
+            tool: self.tool(),
+        }
+    }
+
     /// Its pose and truth with its positioner at `stage_um`, in a view of `spec`'s size
-    /// and magnification.
+    /// and magnification, and the gap from its apex to the sample.
     fn placed(&self, spec: &FrameSpec, stage_um: Vector3<f64>) -> (Placement, FrameTruth, f64) {
+        if self.place.tool.is_some() {
+            return self.tool_placed(spec, stage_um);
+        }
         let bending: Bending = self.contact.bending(stage_um);
         let angle_deg = self.pressing_sign * bending.phi0_rad.to_degrees();
         // Before contact the probe descends toward its contact point; then the apex stays
@@ -104,9 +129,37 @@ impl ProbeView {
         let truth = FrameTruth {
             probe_in_view: true,
             angle_deg,
-            force_nn: self.pressing_sign * bending.force_nn,
+            force_nn: Some(self.pressing_sign * bending.force_nn),
         };
         (place, truth, gap_um)
+    }
+
+    /// A rigid tool's pose and truth: it hangs free, unbent, its tip where `apex_at`
+    /// puts it when the positioner is at its start, moved on screen as the positioner
+    /// moves from there (pressing moves it down), within the view as a cantilever's.
+    fn tool_placed(
+        &self,
+        spec: &FrameSpec,
+        stage_um: Vector3<f64>,
+    ) -> (Placement, FrameTruth, f64) {
+        let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+        let press = self.contact.press_direction;
+        let moved_um = stage_um - press * self.place.start_um;
+        let travel_um = moved_um.dot(&press);
+        let lateral_x_um = (moved_um - press * travel_um).x;
+        let ppu = spec.px_per_um();
+        let [ax, ay] = self.place.apex_at;
+        let mut place = self.at_rest(w, h);
+        place.apex_px = [
+            (ax * w + lateral_x_um * ppu).clamp((ax - 0.25) * w, (ax + 0.25) * w),
+            (ay * h + travel_um * ppu).clamp((ay - 0.25) * h, (ay + 0.2) * h),
+        ];
+        let truth = FrameTruth {
+            probe_in_view: true,
+            angle_deg: 0.0,
+            force_nn: None,
+        };
+        (place, truth, f64::INFINITY)
     }
 }
 
@@ -120,6 +173,7 @@ impl SemScene {
             entry: Entry::Left,
             apex_at: APEX_AT_CONTACT,
             start_um: 0.0,
+            tool: None,
         };
         let probe = ProbeView::new(&params, contact, pressing_sign, place);
         SemScene::several(params, vec![probe])
@@ -156,7 +210,7 @@ impl SemScene {
         let truth = truths[0].unwrap_or(FrameTruth {
             probe_in_view: false,
             angle_deg: 0.0,
-            force_nn: 0.0,
+            force_nn: None,
         });
         (spec, truth)
     }
@@ -224,19 +278,10 @@ impl SemScene {
             // Every probe at rest where it stands in the run's first frames.
             let (w, h) = (f64::from(reference.width), f64::from(reference.height));
             reference.magnification = self.params.magnification_at(0.0);
-            let place = |p: &ProbeView| Placement {
-                probe: p.setup.probe,
-                entry: p.setup.entry,
-                base_deg: p.setup.base_deg,
-                angle_deg: 0.0,
-                apex_px: [p.place.apex_at[0] * w, p.place.apex_at[1] * h],
-                blank: false,
-                tool: None,
-            };
-            let others: Vec<Placement> = self.probes[1..].iter().map(place).collect();
+            let others: Vec<Placement> = self.probes[1..].iter().map(|p| p.at_rest(w, h)).collect();
             reference = FrameSpec {
                 others: Others::of(&others),
-                ..reference.placing(place(&self.probes[0]))
+                ..reference.placing(self.probes[0].at_rest(w, h))
             };
             reference.look.particles = 0;
         }
@@ -249,15 +294,23 @@ impl SemScene {
             click_seed: self.params.seed ^ 0x5EED,
         };
         let (image, _) = scene::render(&reference);
-        let clicks = (0..self.probes.len())
-            .map(|k| {
-                let clicks = session.clicks_of(k);
-                CalibrationConfig::pyramid(
-                    "<simulated SEM reference frame>".into(),
-                    clicks.red,
-                    clicks.blue,
-                    clicks.green,
-                )
+        let name = "<simulated SEM reference frame>";
+        let clicks = self
+            .probes
+            .iter()
+            .enumerate()
+            .map(|(k, probe)| match probe.place.tool {
+                Some(kind) => CalibrationConfig {
+                    reference_image: name.into(),
+                    edges: reference
+                        .nth_probe(k)
+                        .map_or(Vec::new(), |own| tool_clicks(&own)),
+                    apex: Some(kind.apex_edges().map(String::from)),
+                },
+                None => {
+                    let clicks = session.clicks_of(k);
+                    CalibrationConfig::pyramid(name.into(), clicks.red, clicks.blue, clicks.green)
+                }
             })
             .collect();
         (image, clicks)

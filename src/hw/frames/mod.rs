@@ -28,7 +28,8 @@ pub const NO_TRUTH: [Option<FrameTruth>; MAX_TRUTHS] = [None; MAX_TRUTHS];
 pub struct FrameTruth {
     pub probe_in_view: bool,
     pub angle_deg: f64,
-    pub force_nn: f64,
+    /// The force on the tip; none for a rigid tool (it has no force).
+    pub force_nn: Option<f64>,
 }
 
 #[derive(Debug, thiserror::Error)]
