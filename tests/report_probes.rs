@@ -237,6 +237,34 @@ fn recorded_session_of_two_probes_shows_each_probes_force_numbers() {
     );
 }
 
+/// A recording of a cantilever beside a needle (config/sim-needle.toml): the needle's
+/// section plots its angle alone and says it has no true force; the cantilever's keeps
+/// its force plot and numbers.
+#[test]
+fn recorded_needle_has_its_angle_and_no_force() {
+    let state = tempfile::tempdir().unwrap();
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-needle.toml");
+    let out = Command::new(BIN)
+        .args(["run", "--quiet", "--config", config, "--duration-s", "2"])
+        .arg("--state-dir")
+        .arg(state.path())
+        .output()
+        .unwrap();
+    succeeded(&out);
+    let session = recorded_session(state.path());
+    succeeded(&nanoforce(&["report", session.to_str().unwrap()]));
+    let html = std::fs::read_to_string(session.join("report/report.html")).unwrap();
+    let (lever, needle) = (section(&html, "lever"), section(&html, "needle"));
+    assert!(lever.contains("<h3>Force and tip angle</h3>"));
+    assert!(row_value(lever, "Felt force error (stats.json)").starts_with("rms "));
+    assert!(needle.contains("<h3>Tip angle</h3>") && !needle.contains("Force and tip angle"));
+    assert_eq!(
+        row_value(needle, "Felt force error (stats.json)"),
+        "n/a: no true force (a real SEM, or a probe without a cantilever)"
+    );
+    assert!(session.join("report/force_angle.needle.png").is_file());
+}
+
 const TWO_PROBES: &str = "[[probe]]\nname = \"left\"\n[probe.cantilever]\nlength_um = 400\n\
 spring_constant_n_per_m = 1\n[[probe]]\nname = \"right\"\n[probe.cantilever]\n\
 length_um = 400\nspring_constant_n_per_m = 1\n";

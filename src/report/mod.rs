@@ -276,12 +276,29 @@ fn probe_plots(data: &SessionData, k: usize) -> Vec<Plot> {
         ],
         y_range: Some([-0.08, 1.08]),
     };
+    let has_force = probe
+        .rows
+        .iter()
+        .any(|r| r.force_nn.is_some() || r.true_force_nn.is_some());
+    let (panels, title, caption) = match has_force {
+        true => (
+            vec![force, angle],
+            "Force and tip angle",
+            "Tracked values of every frame; gaps are frames without a detection.",
+        ),
+        false => (
+            vec![angle],
+            "Tip angle",
+            "Tracked values of every frame; gaps are frames without a detection. No force: \
+             the probe has no cantilever (a rigid tool).",
+        ),
+    };
     vec![
         (
             file("force_angle.png"),
-            "Force and tip angle",
-            "Tracked values of every frame; gaps are frames without a detection.".into(),
-            plot::panels(&[force, angle], x_label, WIDTH, 300),
+            title,
+            caption.into(),
+            plot::panels(&panels, x_label, WIDTH, 300),
         ),
         (
             file("detection.png"),

@@ -303,14 +303,18 @@ fn probe_stats_rows(stats: &Value, name: &str, add: &mut impl FnMut(&str, String
         "Detected (daemon)",
         format!("{} frames", fmt(num(&["frames", "detected"]), 0)),
     );
-    add(
-        "Felt force error (stats.json)",
-        format!(
+    let force = match num(&["force", "true_peak_nN"]) {
+        // Frames from a real SEM carry no truth, and a rigid tool has no force.
+        None => {
+            format!("{NOT_AVAILABLE}: no true force (a real SEM, or a probe without a cantilever)")
+        }
+        peak => format!(
             "rms {} nN, max {} nN, {} samples; true peak {} nN",
             fmt(num(&["force", "rms_error_nN"]), 1),
             fmt(num(&["force", "max_error_nN"]), 1),
             fmt(num(&["force", "samples"]), 0),
-            fmt(num(&["force", "true_peak_nN"]), 0),
+            fmt(peak, 0),
         ),
-    );
+    };
+    add("Felt force error (stats.json)", force);
 }
