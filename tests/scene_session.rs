@@ -5,7 +5,9 @@
 use std::path::Path;
 
 use nanoforce::config::{Config, Threshold};
-use nanoforce::scene::{suite, Entry, FrameFormat, Session, Style};
+use nanoforce::daemon::lab::probe_trackers;
+use nanoforce::scene::{suite, Entry, FrameFormat, Session, Style, ToolKind};
+use nanoforce::vision::{Estimate, ProbeSet};
 
 fn read(path: &Path) -> String {
     std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -52,6 +54,53 @@ fn mixed_session_layout_parses_with_config_load() {
         let t_s: f64 = cols[9].parse().expect("t_s");
         assert!((t_s - k as f64 / 60.0).abs() < 1e-6);
     }
+}
+
+/// A session of two rigid tools is written as a lab folder: its probe.toml gives each
+/// tool as a `[[probe]]` of named edges, without a cantilever and searched over the
+/// frames' scales, and the trackers `replay` builds from that file track the written
+/// frames exactly as the session's own trackers track them.
+#[test]
+fn a_session_of_two_tools_is_written_as_it_is_tracked() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let kinds = [ToolKind::Needle, ToolKind::Gripper];
+    let session = Session::two_tools(kinds, 5, 16);
+    session.write(dir.path(), FrameFormat::Png).expect("write");
+    let cfg = Config::load(&dir.path().join("probe.toml")).expect("probe.toml parses");
+    for (probe, kind) in cfg.probes.iter().zip(kinds) {
+        assert!(probe.cantilever.is_none() && !probe.felt, "{}", probe.name);
+        let cal = probe.tracker.calibration.as_ref().expect("calibration");
+        assert_eq!(cal.apex, Some(kind.apex_edges().map(String::from)));
+        let names: Vec<&str> = cal.edges.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, kind.edge_names());
+        assert!(probe.tracker.scale_range.is_some());
+    }
+    let mut from_file = probe_trackers(&cfg).expect("trackers from probe.toml");
+    let mut own = ProbeSet::new(session.trackers().expect("trackers"), &[(); 2]);
+    let mut detected = 0;
+    for (k, name) in session.probe_names().iter().enumerate() {
+        assert!(
+            dir.path().join(format!("truth.{name}.csv")).is_file(),
+            "{k}"
+        );
+    }
+    for k in 0..session.frames.len() {
+        let path = dir.path().join(format!("frames/frame_{k:05}.png"));
+        let frame = image::open(&path).expect("frame").to_luma8();
+        let (mut a, mut b) = ([Estimate::default(); 2], [Estimate::default(); 2]);
+        from_file.track(&frame, &mut a);
+        own.track(&frame, &mut b);
+        for (a, b) in a.iter().zip(&b) {
+            assert_eq!(a.detected, b.detected, "frame {k}");
+            assert_eq!(a.angle_deg, b.angle_deg, "frame {k}");
+            assert!(a.force_nn.is_none());
+            detected += usize::from(a.detected);
+        }
+    }
+    assert!(
+        detected >= 16,
+        "{detected} detections in 16 frames of two tools"
+    );
 }
 
 #[test]

@@ -14,10 +14,10 @@ mod tracker_support;
 
 use image::GrayImage;
 use nanoforce::scene::{
-    render_into, render_tool_into, tool_clicks, tool_truth, truth_of, FrameSpec, Session, ToolKind,
+    render_into, render_tool_into, tool_truth, truth_of, FrameFormat, FrameSpec, Session, ToolKind,
 };
 use nanoforce::session::results::read_results;
-use nanoforce::vision::{CalibrationConfig, Estimate, Miss, ProbeSet, Tracker};
+use nanoforce::vision::{Estimate, Miss, ProbeSet, Tracker};
 use tracker_support::{rendered, score, Truth};
 
 fn seed(default: u64) -> u64 {
@@ -359,43 +359,24 @@ fn a_probe_refused_beside_a_found_one_is_searched_again_without_its_body() {
 
 #[test]
 fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
-    // `replay` of a lab file naming a needle (its edges, no cantilever) and an AFM
-    // cantilever as two `[[probe]]` entries on one reference: a CSV each, the
-    // needle's without force, the cantilever's with it.
+    // `replay` of the session folder `Session::write` makes of a needle (its named
+    // edges, no cantilever) beside an AFM cantilever, two `[[probe]]` entries on one
+    // reference: a CSV each, the needle's without force, the cantilever's with it.
     const FRAMES: usize = 24;
-    let session = Session::tool_beside_a_cantilever(ToolKind::Needle, seed(3), 300);
+    let mut session = Session::tool_beside_a_cantilever(ToolKind::Needle, seed(3), 300);
+    session.frames.truncate(FRAMES);
     let dir = tempfile::tempdir().unwrap();
+    session.write(dir.path(), FrameFormat::Png).unwrap();
     let frames_dir = dir.path().join("frames");
-    std::fs::create_dir(&frames_dir).unwrap();
-    let mut frame = GrayImage::new(1, 1);
-    let clicks = tool_clicks(&session.reference);
-    render_tool_into(&session.reference, &[], &mut frame);
-    frame.save(dir.path().join("reference.png")).unwrap();
-    let mut truths = Vec::new();
-    for (k, spec) in session.frames.iter().take(FRAMES).enumerate() {
-        let tool = render_tool_into(spec, &[], &mut frame);
-        let afm = truth_of(&spec.nth_probe(1).expect("placed"));
-        truths.push((tool, afm));
-        frame
-            .save(frames_dir.join(format!("frame_{k:05}.png")))
-            .unwrap();
-    }
-    let points = CalibrationConfig::toml_points;
-    let apex = ToolKind::Needle.apex_edges();
-    let mut toml = format!(
-        "[[probe]]\nname = \"needle\"\n[probe.tracker]\nscale_range = [{}, {}]\n\
-         [probe.tracker.calibration]\nreference_image = \"reference.png\"\n\
-         apex = [\"{}\", \"{}\"]\n[probe.tracker.calibration.edges]\n",
-        session.scales().lo,
-        session.scales().hi,
-        apex[0],
-        apex[1]
-    );
-    for (name, p) in &clicks {
-        toml.push_str(&format!("{name} = {}\n", points(p)));
-    }
-    toml.push_str(&session.probe_entry(1, "cantilever"));
-    std::fs::write(dir.path().join("probe.toml"), &toml).unwrap();
+    let truths: Vec<_> = session
+        .frames
+        .iter()
+        .map(|spec| {
+            let tool = tool_truth(spec).expect("the frame places a tool");
+            (tool, truth_of(&spec.nth_probe(1).expect("placed")))
+        })
+        .collect();
+    let toml = std::fs::read_to_string(dir.path().join("probe.toml")).unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_nanoforce"))
         .arg("replay")
         .arg(&frames_dir)
@@ -411,7 +392,7 @@ fn replay_writes_each_probe_of_a_tool_beside_a_cantilever() {
         String::from_utf8_lossy(&out.stderr)
     );
     let mut found = [0, 0];
-    for (k, name) in ["needle", "cantilever"].iter().enumerate() {
+    for (k, name) in ["probe1", "probe2"].iter().enumerate() {
         let rows = read_results(&dir.path().join(format!("out.{name}.csv"))).unwrap();
         assert_eq!(rows.len(), FRAMES, "{name}");
         for (row, (tool, afm)) in rows.iter().zip(&truths) {

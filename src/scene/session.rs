@@ -15,9 +15,9 @@ use super::render::{truth_of, Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
 use super::tool::tool_clicks;
+use super::tool_shape::ToolGeometry;
 use crate::vision::{
-    calibrate_rigid, Calibration, CalibrationConfig, ScaleRange, Threshold, Tracker, TrackerConfig,
-    VisionError, SINGLE_NAME,
+    CalibrationConfig, ScaleRange, Threshold, Tracker, TrackerConfig, VisionError, SINGLE_NAME,
 };
 
 /// Magnifications an operator picks from (those of the public samples).
@@ -105,62 +105,69 @@ impl Session {
     }
 
     /// The `[tracker]` settings of probe `k` (as [`Session::probe_toml`] writes them),
-    /// its calibration clicks from [`Session::clicks_of`].
+    /// its calibration clicks from [`Session::clicks_of`] (a tool's from
+    /// [`tool_clicks`], searched over [`Session::scales`]).
     pub fn tracker_config_of(&self, k: usize) -> TrackerConfig {
-        self.tracker_config_with(self.calibration_of(k))
-    }
-
-    /// The session's `[tracker]` settings with the calibration `clicks`.
-    fn tracker_config_with(&self, clicks: CalibrationConfig) -> TrackerConfig {
         TrackerConfig {
             threshold: self.threshold,
             window_deg: self.window_deg,
-            calibration: Some(clicks),
+            scale_range: self.tool_of(k).map(|_| {
+                // As the file writes it, to 1e-4 outward.
+                let range = self.scales();
+                ScaleRange::new(
+                    (range.lo * 1e4).floor() / 1e4,
+                    (range.hi * 1e4).ceil() / 1e4,
+                )
+            }),
+            calibration: Some(self.calibration_of(k)),
             ..TrackerConfig::default()
         }
     }
 
-    /// The `[tracker.calibration]` of probe `k`: the reference and its clicks.
+    /// Probe `k` of the reference alone (0: its own, then the others).
+    fn nth(&self, k: usize) -> FrameSpec {
+        self.reference.nth_probe(k).unwrap_or(self.reference)
+    }
+
+    /// Probe `k`'s rigid tool, if it is one.
+    fn tool_of(&self, k: usize) -> Option<ToolGeometry> {
+        self.nth(k).tool
+    }
+
+    /// The `[tracker.calibration]` of probe `k`: the reference and its clicks, to 0.1 px
+    /// as the file writes them; a tool's named edges with the two meeting at its tip.
     fn calibration_of(&self, k: usize) -> CalibrationConfig {
+        let reference_image = PathBuf::from("reference.png");
+        let own = self.nth(k);
+        if let Some(tool) = own.tool {
+            let tenth = |p: [f64; 2]| p.map(|v| (10.0 * v).round() / 10.0);
+            return CalibrationConfig {
+                reference_image,
+                edges: tool_clicks(&own)
+                    .into_iter()
+                    .map(|(name, points)| (name, points.into_iter().map(tenth).collect()))
+                    .collect(),
+                apex: Some(tool.kind.apex_edges().map(String::from)),
+            };
+        }
         let clicks = self.clicks_of(k);
-        CalibrationConfig::pyramid(
-            "reference.png".into(),
-            clicks.red,
-            clicks.blue,
-            clicks.green,
-        )
+        CalibrationConfig::pyramid(reference_image, clicks.red, clicks.blue, clicks.green)
     }
 
     /// A tracker for each probe of the reference, in order, calibrated on the rendered
     /// reference with [`Session::tracker_config_of`] and forces from its geometry: the
-    /// trackers `replay` builds from the session's probe.toml. A tool is calibrated
-    /// from [`tool_clicks`], over the scales of the session's frames (10 %
-    /// to spare, as a lab states them), without a cantilever.
+    /// trackers `replay` builds from the session's probe.toml. A tool has no
+    /// cantilever.
     pub fn trackers(&self) -> Result<Vec<Tracker>, VisionError> {
         let mut reference = GrayImage::new(1, 1);
         Renderer::new().render_into(&self.reference, &mut reference);
         (0..self.reference.probe_count())
             .map(|k| {
-                let own = self.reference.nth_probe(k).unwrap_or(self.reference);
-                if let Some(tool) = own.tool {
-                    let template =
-                        calibrate_rigid(&reference, &tool_clicks(&own), tool.kind.apex_edges())?;
-                    let cfg = TrackerConfig {
-                        threshold: self.threshold,
-                        window_deg: self.window_deg,
-                        scale_range: Some(self.scales()),
-                        ..TrackerConfig::default()
-                    };
-                    return Ok(Tracker::rigid(&cfg, template, None)?);
-                }
+                let cfg = self.tracker_config_of(k);
                 let clicks = self.calibration_of(k);
-                let cfg = self.tracker_config_with(clicks.clone());
-                let cal = Calibration::from_reference(&reference, &clicks, &cfg)?;
-                let probe = self
-                    .reference
-                    .nth_probe(k)
-                    .map_or(*self.probe(), |s| s.probe);
-                Ok(Tracker::new(&cfg, cal, Some(probe.cantilever())))
+                let own = self.nth(k);
+                let cantilever = own.tool.is_none().then(|| own.probe.cantilever());
+                Tracker::from_reference(&reference, &clicks, &cfg, cantilever)
             })
             .collect()
     }
@@ -260,30 +267,50 @@ impl Session {
         )
     }
 
-    /// Probe `k`'s cantilever, tracker and calibration tables, their names prefixed
-    /// with `prefix`.
+    /// Probe `k`'s cantilever (none for a tool), tracker and calibration tables, their
+    /// names prefixed with `prefix`.
     fn probe_settings(&self, k: usize, prefix: &str) -> String {
-        let probe = self
-            .reference
-            .nth_probe(k)
-            .map_or(*self.probe(), |s| s.probe);
-        let clicks = self.clicks_of(k);
+        let own = self.nth(k);
+        let cfg = self.tracker_config_of(k);
+        let clicks = self.calibration_of(k);
         let points = CalibrationConfig::toml_points;
-        format!(
-            "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n\
-             [{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n\n\
-             [{prefix}tracker.calibration]\n\
+        let mut text = String::new();
+        if own.tool.is_none() {
+            let _ = write!(
+                text,
+                "[{prefix}cantilever]\nlength_um = {:.3}\nspring_constant_n_per_m = {:.4}\n\n",
+                own.probe.length_um, own.probe.spring_constant_n_per_m,
+            );
+        }
+        let _ = write!(
+            text,
+            "[{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n",
+            self.threshold, self.window_deg,
+        );
+        if let Some(range) = cfg.scale_range {
+            let _ = writeln!(text, "scale_range = [{:.4}, {:.4}]", range.lo, range.hi);
+        }
+        let _ = write!(
+            text,
+            "\n[{prefix}tracker.calibration]\n\
              reference_image = \"reference.png\"  # relative to this file\n\
-             # pixels marked on each tip edge in the reference image; x right, y down\n\
-             red = {}\nblue = {}\ngreen = {}\n",
-            probe.length_um,
-            probe.spring_constant_n_per_m,
-            self.threshold,
-            self.window_deg,
-            points(&clicks.red),
-            points(&clicks.blue),
-            points(&clicks.green),
-        )
+             # pixels marked on each edge in the reference image; x right, y down\n",
+        );
+        match &clicks.apex {
+            None => {
+                for (name, clicked) in &clicks.edges {
+                    let _ = writeln!(text, "{name} = {}", points(clicked));
+                }
+            }
+            Some([a, b]) => {
+                let _ = writeln!(text, "apex = [\"{a}\", \"{b}\"]");
+                let _ = writeln!(text, "[{prefix}tracker.calibration.edges]");
+                for (name, clicked) in &clicks.edges {
+                    let _ = writeln!(text, "{name} = {}", points(clicked));
+                }
+            }
+        }
+        text
     }
 
     /// Writes the session into `dir` (created if needed) and returns every frame's truth
