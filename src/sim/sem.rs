@@ -316,3 +316,73 @@ impl SemScene {
         (image, clicks)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::ToolKind;
+    use crate::sim::contact::SampleParams;
+
+    /// A cantilever on the left and a needle on the right, as config/sim-needle.toml.
+    fn lever_and_needle() -> SemScene {
+        let params = SemParams::default();
+        let ei = Cantilever::rigidity_from_spring_constant(0.06, 434.675);
+        let contact = Contact {
+            sample: SampleParams::default(),
+            cantilever: Cantilever::new(434.675, ei),
+            press_direction: Vector3::new(0.0, 0.0, -1.0),
+        };
+        let place = |entry, apex_at, tool| SimProbe {
+            entry,
+            apex_at,
+            start_um: 0.0,
+            tool,
+        };
+        let lever = ProbeView::new(
+            &params,
+            contact.clone(),
+            1.0,
+            place(Entry::Left, [0.3, 0.45], None),
+        );
+        let needle = ProbeView::new(
+            &params,
+            contact,
+            -1.0,
+            place(Entry::Right, [0.65, 0.4], Some(ToolKind::Needle)),
+        );
+        SemScene::several(params, vec![lever, needle])
+    }
+
+    #[test]
+    fn a_tool_hangs_unbent_where_its_positioner_puts_it() {
+        let scene = lever_and_needle();
+        let pressed = Vector3::new(0.0, 0.0, -40.0);
+        let (spec, truths) = scene.view(1.0, 7, &[pressed, Vector3::zeros()]);
+        let needle = truths[1].expect("the needle's truth");
+        assert_eq!((needle.angle_deg, needle.force_nn), (0.0, None));
+        assert!(truths[0].and_then(|t| t.force_nn).is_some_and(|f| f != 0.0));
+        let drawn = spec.others.iter().next().expect("the needle is drawn");
+        assert_eq!(drawn.tool, Some(ToolGeometry::typical(ToolKind::Needle)));
+        let (w, h) = (f64::from(spec.width), f64::from(spec.height));
+        assert_eq!(drawn.apex_px, [0.65 * w, 0.4 * h]);
+        // Its own positioner moved 5 um along the press direction: 5 um down on screen.
+        let (spec, _) = scene.view(1.0, 7, &[pressed, Vector3::new(0.0, 0.0, -5.0)]);
+        let moved = spec.others.iter().next().expect("drawn").apex_px;
+        assert!(
+            (moved[1] - 0.4 * h - 5.0 * spec.px_per_um()).abs() < 1e-9,
+            "{moved:?}"
+        );
+    }
+
+    #[test]
+    fn a_tool_is_clicked_on_its_named_edges() {
+        let (_, clicks) = lever_and_needle().references(Threshold::Otsu, 20.0);
+        assert_eq!(clicks[0].apex, None, "the cantilever's pyramid");
+        assert_eq!(
+            clicks[1].apex,
+            Some(["upper".to_string(), "end".to_string()])
+        );
+        let names: Vec<&str> = clicks[1].edges.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["upper", "lower", "end"]);
+    }
+}
