@@ -155,20 +155,30 @@ fn recorded_session(state: &Path) -> PathBuf {
     sessions[0].clone()
 }
 
-#[test]
-fn recorded_session_of_two_probes_shows_each_probes_force_numbers() {
-    let state = tempfile::tempdir().unwrap();
-    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-two-probes.toml");
+/// A 2 s run of the lab in `config/<file>`, recorded under `state`, and its report:
+/// the session folder, the report's messages and its page.
+fn recorded_report(state: &Path, file: &str) -> (PathBuf, String, String) {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
     let out = Command::new(BIN)
-        .args(["run", "--quiet", "--config", config, "--duration-s", "2"])
+        .args(["run", "--quiet", "--duration-s", "2", "--config"])
+        .arg(&config)
         .arg("--state-dir")
-        .arg(state.path())
+        .arg(state)
         .output()
         .unwrap();
     succeeded(&out);
-    let session = recorded_session(state.path());
+    let session = recorded_session(state);
     let err = succeeded(&nanoforce(&["report", session.to_str().unwrap()]));
     let html = std::fs::read_to_string(session.join("report/report.html")).unwrap();
+    (session, err, html)
+}
+
+#[test]
+fn recorded_session_of_two_probes_shows_each_probes_force_numbers() {
+    let state = tempfile::tempdir().unwrap();
+    let (session, err, html) = recorded_report(state.path(), "sim-two-probes.toml");
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(session.join("stats.json")).unwrap())
             .unwrap();
@@ -243,17 +253,7 @@ fn recorded_session_of_two_probes_shows_each_probes_force_numbers() {
 #[test]
 fn recorded_needle_has_its_angle_and_no_force() {
     let state = tempfile::tempdir().unwrap();
-    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-needle.toml");
-    let out = Command::new(BIN)
-        .args(["run", "--quiet", "--config", config, "--duration-s", "2"])
-        .arg("--state-dir")
-        .arg(state.path())
-        .output()
-        .unwrap();
-    succeeded(&out);
-    let session = recorded_session(state.path());
-    succeeded(&nanoforce(&["report", session.to_str().unwrap()]));
-    let html = std::fs::read_to_string(session.join("report/report.html")).unwrap();
+    let (session, _, html) = recorded_report(state.path(), "sim-needle.toml");
     let (lever, needle) = (section(&html, "lever"), section(&html, "needle"));
     assert!(lever.contains("<h3>Force and tip angle</h3>"));
     assert!(row_value(lever, "Felt force error (stats.json)").starts_with("rms "));

@@ -68,6 +68,17 @@ fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
     one_twelve_second_run(config)
 }
 
+/// [`twelve_seconds`] of the lab in `config/<file>`, whose probes are `names`.
+fn twelve_seconds_of(file: &str, names: [&str; 2]) -> (RunStats, tempfile::TempDir, f64, bool) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(file);
+    let run = twelve_seconds(&Config::load(&path).unwrap());
+    let probes: Vec<&str> = run.0.probes.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(probes, names);
+    run
+}
+
 /// Whether a run met the timing targets [`assert_timing_targets`] checks on a host
 /// that leaves the run alone: no frame dropped, frame latency p99 <= 5 ms, the loop at
 /// 1000 +- 5 Hz with its period p99 within 1000 +- 100 us.
@@ -121,29 +132,19 @@ fn one_twelve_second_run(config: &Config) -> (RunStats, tempfile::TempDir, f64, 
 #[test]
 fn two_probes_meet_the_force_and_timing_targets() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-two-probes.toml");
-    let config = Config::load(&path).unwrap();
-    let (s, session, steal, realtime) = twelve_seconds(&config);
-    let names: Vec<&str> = s.probes.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["left", "right"]);
+    let (s, session, steal, realtime) = twelve_seconds_of("sim-two-probes.toml", ["left", "right"]);
     // The pressing probe reaches the operator's 3 uN; the other holds about 2 uN.
     for (probe, (min_peak_nn, what)) in s.probes.iter().zip([(2500.0, "~3 uN"), (1500.0, "~2 uN")])
     {
         assert_force_targets(&probe.force, min_peak_nn, what);
-        let detected = probe.frames.detected as f64;
-        assert!(
-            detected >= 0.95 * s.frames.tracked as f64,
-            "{}: detected in {detected} of {} frames",
-            probe.name,
-            s.frames.tracked
-        );
     }
+    assert_each_detected_in_most_frames(&s);
     assert_eq!(
         s.force, s.probes[0].force,
         "the top level is the first probe's"
     );
     assert_eq!(s.safety.faults, 0);
-    for name in names {
+    for name in ["left", "right"] {
         let file = session.path().join(format!("estimates.{name}.csv"));
         let rows = std::fs::read_to_string(&file).unwrap().lines().count();
         assert!(
@@ -164,11 +165,7 @@ fn two_probes_meet_the_force_and_timing_targets() {
 #[test]
 fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-needle.toml");
-    let config = Config::load(&path).unwrap();
-    let (s, session, steal, realtime) = twelve_seconds(&config);
-    let names: Vec<&str> = s.probes.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["lever", "needle"]);
+    let (s, session, steal, realtime) = twelve_seconds_of("sim-needle.toml", ["lever", "needle"]);
     assert_force_targets(&s.probes[0].force, 2500.0, "~3 uN");
     let needle = &s.probes[1];
     assert_eq!(
@@ -176,15 +173,7 @@ fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
         ForceStats::from_errors(None),
         "a needle has no force"
     );
-    for probe in &s.probes {
-        let detected = probe.frames.detected as f64;
-        assert!(
-            detected >= 0.95 * s.frames.tracked as f64,
-            "{}: detected in {detected} of {} frames",
-            probe.name,
-            s.frames.tracked
-        );
-    }
+    assert_each_detected_in_most_frames(&s);
     let rows = read_results(&session.path().join("estimates.needle.csv")).unwrap();
     assert!(
         rows.len() as u64 > s.frames.tracked / 2,
@@ -209,6 +198,19 @@ fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
     );
     assert_eq!(s.safety.faults, 0);
     assert_timing_targets(&s, steal, realtime);
+}
+
+/// Every probe of the run detected in at least 95 % of the frames tracked.
+fn assert_each_detected_in_most_frames(s: &RunStats) {
+    for probe in &s.probes {
+        let detected = probe.frames.detected as f64;
+        assert!(
+            detected >= 0.95 * s.frames.tracked as f64,
+            "{}: detected in {detected} of {} frames",
+            probe.name,
+            s.frames.tracked
+        );
+    }
 }
 
 /// The daemon's timing: the loop runs and keeps its typical period, the tracker keeps
