@@ -502,7 +502,7 @@ impl Fitter {
             {
                 // Neither apex edge shows the corner: the tip is hidden.
                 refusal = Some(Miss::EdgeMissing(edge.name));
-            } else if self.runs_on(t, &pose, e) {
+            } else if self.runs_on(t, &pose, e, inside[e]) {
                 refusal = Some(Miss::ScaleMismatch);
             }
         }
@@ -690,15 +690,22 @@ impl Fitter {
         own.min(outline)
     }
 
-    /// Every station past a closed end of edge `e` holds it.
-    fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
+    /// Every station past a closed end of edge `e` holds it, with the probe's `level`
+    /// on its side (the edge's holding stations'): the probe's body runs on. A particle
+    /// beside the corner of another level (brighter than a bright probe) steps on the
+    /// line's side too, but is not the probe.
+    fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize, level: f64) -> bool {
         let edge = &t.edges[e];
+        let probe_level = |p: &Point| {
+            level.is_nan() || (p.inside - level).abs() <= ONE_BODY_SHARE * edge.step.abs()
+        };
         let past = |end: usize| {
             self.points
                 .iter()
                 .filter(|p| p.edge == MAX_EDGES + e)
                 .filter(|p| (p.tau > edge.extent[1]) == (end == 1))
                 .filter(|p| p.step >= RUN_ON_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX)
+                .filter(|p| probe_level(p))
                 .count()
         };
         (0..2).any(|end| !edge.open[end] && past(end) == BEYOND_PX.len())

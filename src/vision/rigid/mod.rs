@@ -576,8 +576,8 @@ mod tests {
     }
 
     /// A frame whose lower flank runs on 30 px past the blunt end, as a strip 6 px
-    /// thick (a longer probe's): refused as a scale mismatch, where the same needle
-    /// without the strip is detected.
+    /// thick at the needle's level (a longer probe's): refused as a scale mismatch,
+    /// where the same needle without the strip, or with a brighter one, is detected.
     #[test]
     fn a_flank_running_on_past_its_corner_is_refused() {
         let apex = [250.0, 100.0];
@@ -595,6 +595,21 @@ mod tests {
         }
         let e = tracker.track(&frame);
         assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
+        // The same strip from 4 px past the end on, brighter than the needle (250
+        // against 180), is another body beside the corner, as a particle is: the
+        // flank ends at its corner.
+        let mut frame = needle(0.0, apex, 4.0, 2);
+        for y in 80..125u32 {
+            for x in 254..281u32 {
+                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+                let lower = 12.0 - 0.12 * dx;
+                if dy < lower && dy >= lower - 6.0 {
+                    frame.put_pixel(x, y, image::Luma([250]));
+                }
+            }
+        }
+        let e = tracker.track(&frame);
+        assert!(e.detected, "{e:?}");
     }
 
     /// A needle whose tip touches a particle drawn under it (8 px across, beside the
