@@ -582,33 +582,27 @@ mod tests {
     fn a_flank_running_on_past_its_corner_is_refused() {
         let apex = [250.0, 100.0];
         let mut tracker = needle_tracker(apex);
-        let mut frame = needle(0.0, apex, 4.0, 2);
-        assert!(tracker.track(&frame).detected);
-        for y in 80..125u32 {
-            for x in 251..281u32 {
-                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
-                let lower = 12.0 - 0.12 * dx;
-                if dy < lower && dy >= lower - 6.0 {
-                    frame.put_pixel(x, y, image::Luma([180]));
+        assert!(tracker.track(&needle(0.0, apex, 4.0, 2)).detected);
+        // The needle with the strip from `past` px beyond its end to 30 px, at `level`.
+        let with_strip = |past: u32, level: u8| {
+            let mut frame = needle(0.0, apex, 4.0, 2);
+            for y in 80..125u32 {
+                for x in 250 + past..281u32 {
+                    let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
+                    let lower = 12.0 - 0.12 * dx;
+                    if dy < lower && dy >= lower - 6.0 {
+                        frame.put_pixel(x, y, image::Luma([level]));
+                    }
                 }
             }
-        }
-        let e = tracker.track(&frame);
+            frame
+        };
+        let e = tracker.track(&with_strip(1, 180));
         assert_eq!(e.miss, Some(Miss::ScaleMismatch), "{e:?}");
         // The same strip from 4 px past the end on, brighter than the needle (250
         // against 180), is another body beside the corner, as a particle is: the
         // flank ends at its corner.
-        let mut frame = needle(0.0, apex, 4.0, 2);
-        for y in 80..125u32 {
-            for x in 254..281u32 {
-                let (dx, dy) = (f64::from(x) - apex[0], f64::from(y) - apex[1]);
-                let lower = 12.0 - 0.12 * dx;
-                if dy < lower && dy >= lower - 6.0 {
-                    frame.put_pixel(x, y, image::Luma([250]));
-                }
-            }
-        }
-        let e = tracker.track(&frame);
+        let e = tracker.track(&with_strip(4, 250));
         assert!(e.detected, "{e:?}");
     }
 
