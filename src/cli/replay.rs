@@ -40,8 +40,9 @@ FRAMES_DIR, in file-name order (frame_seq counts them 1, 2, ...); --config is re
 A file that does not decode is reported and gets a row with detected = 0; it does not stop \
 the replay.\n\n\
 CSV columns: frame (file name), detected (1/0), angle_deg (tip rotation from the \
-reference, CCW on screen), force_nN (signed as the angle; empty for a probe without a cantilever), tip_x, tip_y (the apex, pixels; \
-x right, y down) - empty when not detected - then confidence, angle_sigma_deg (the angle's \
+reference, CCW on screen), force_nN (signed as the angle; empty for a probe without a \
+cantilever), tip_x, tip_y (the apex, pixels; x right, y down) - empty when not detected - \
+then confidence, angle_sigma_deg (the angle's \
 standard error from the frame's noise and the calibration's; on rendered frames the errors \
 run 1.07-1.14 times it on every look), scale (frame pixels per \
 reference pixel, where the frame measures it: for the AFM pyramid the beam edge's distance \

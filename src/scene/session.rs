@@ -15,7 +15,6 @@ use super::render::{truth_of, Renderer, Truth};
 use super::rng::{sub_seed, Rng};
 use super::spec::{FrameSpec, Style};
 use super::tool::tool_clicks;
-use super::tool_shape::ToolGeometry;
 use crate::vision::{
     CalibrationConfig, ScaleRange, Threshold, Tracker, TrackerConfig, VisionError, SINGLE_NAME,
 };
@@ -108,30 +107,35 @@ impl Session {
     /// its calibration clicks from [`Session::clicks_of`] (a tool's from
     /// [`tool_clicks`], searched over [`Session::scales`]).
     pub fn tracker_config_of(&self, k: usize) -> TrackerConfig {
+        self.tracker_config_with(k, self.calibration_of(k))
+    }
+
+    /// Probe `k`'s `[tracker]` settings with the calibration `clicks`.
+    fn tracker_config_with(&self, k: usize, clicks: CalibrationConfig) -> TrackerConfig {
         TrackerConfig {
             threshold: self.threshold,
             window_deg: self.window_deg,
-            scale_range: self.tool_of(k).map(|_| {
-                // As the file writes it, to 1e-4 outward.
-                let range = self.scales();
-                ScaleRange::new(
-                    (range.lo * 1e4).floor() / 1e4,
-                    (range.hi * 1e4).ceil() / 1e4,
-                )
-            }),
-            calibration: Some(self.calibration_of(k)),
+            scale_range: self.scale_range_of(k),
+            calibration: Some(clicks),
             ..TrackerConfig::default()
         }
+    }
+
+    /// Probe `k`'s `tracker.scale_range`: for a tool, [`Session::scales`] as the file
+    /// writes it, to 1e-4 outward; none for the AFM probe.
+    fn scale_range_of(&self, k: usize) -> Option<ScaleRange> {
+        self.nth(k).tool.map(|_| {
+            let range = self.scales();
+            ScaleRange::new(
+                (range.lo * 1e4).floor() / 1e4,
+                (range.hi * 1e4).ceil() / 1e4,
+            )
+        })
     }
 
     /// Probe `k` of the reference alone (0: its own, then the others).
     fn nth(&self, k: usize) -> FrameSpec {
         self.reference.nth_probe(k).unwrap_or(self.reference)
-    }
-
-    /// Probe `k`'s rigid tool, if it is one.
-    fn tool_of(&self, k: usize) -> Option<ToolGeometry> {
-        self.nth(k).tool
     }
 
     /// The `[tracker.calibration]` of probe `k`: the reference and its clicks, to 0.1 px
@@ -163,8 +167,8 @@ impl Session {
         Renderer::new().render_into(&self.reference, &mut reference);
         (0..self.reference.probe_count())
             .map(|k| {
-                let cfg = self.tracker_config_of(k);
                 let clicks = self.calibration_of(k);
+                let cfg = self.tracker_config_with(k, clicks.clone());
                 let own = self.nth(k);
                 let cantilever = own.tool.is_none().then(|| own.probe.cantilever());
                 Tracker::from_reference(&reference, &clicks, &cfg, cantilever)
@@ -271,7 +275,6 @@ impl Session {
     /// names prefixed with `prefix`.
     fn probe_settings(&self, k: usize, prefix: &str) -> String {
         let own = self.nth(k);
-        let cfg = self.tracker_config_of(k);
         let clicks = self.calibration_of(k);
         let points = CalibrationConfig::toml_points;
         let mut text = String::new();
@@ -287,7 +290,7 @@ impl Session {
             "[{prefix}tracker]\nthreshold = {}\nwindow_deg = {:.1}\n",
             self.threshold, self.window_deg,
         );
-        if let Some(range) = cfg.scale_range {
+        if let Some(range) = self.scale_range_of(k) {
             let _ = writeln!(text, "scale_range = [{:.4}, {:.4}]", range.lo, range.hi);
         }
         let _ = write!(
@@ -296,19 +299,14 @@ impl Session {
              reference_image = \"reference.png\"  # relative to this file\n\
              # pixels marked on each edge in the reference image; x right, y down\n",
         );
-        match &clicks.apex {
-            None => {
-                for (name, clicked) in &clicks.edges {
-                    let _ = writeln!(text, "{name} = {}", points(clicked));
-                }
-            }
-            Some([a, b]) => {
-                let _ = writeln!(text, "apex = [\"{a}\", \"{b}\"]");
-                let _ = writeln!(text, "[{prefix}tracker.calibration.edges]");
-                for (name, clicked) in &clicks.edges {
-                    let _ = writeln!(text, "{name} = {}", points(clicked));
-                }
-            }
+        // The AFM pyramid's red, blue and green stand in the calibration table; a
+        // tool's named edges in their own, after its apex edges.
+        if let Some([a, b]) = &clicks.apex {
+            let _ = writeln!(text, "apex = [\"{a}\", \"{b}\"]");
+            let _ = writeln!(text, "[{prefix}tracker.calibration.edges]");
+        }
+        for (name, clicked) in &clicks.edges {
+            let _ = writeln!(text, "{name} = {}", points(clicked));
         }
         text
     }
