@@ -271,6 +271,7 @@ impl Fitter {
             MAX_STATIONS,
             true,
         );
+        self.read_short_edges_at_line(frame, template, &pose);
         let sigma =
             (covariance[(0, 0)].max(0.0).sqrt() * SIGMA_FACTOR).hypot(template.angle_sigma_rad);
         self.verify(frame, template, pose, sigma, bounds.window_rad)
@@ -333,6 +334,43 @@ impl Fitter {
                             edge.step,
                         ));
                     }
+                }
+            }
+        }
+    }
+
+    /// Reads again, centred on its line at `pose`, each station in view that does not
+    /// hold an edge of so few stations that two of them decide it (a blunt end), and
+    /// keeps the new reading where it holds. A station finds its step at the largest
+    /// one-pixel rise within its reach, which noise as large as the step moves by
+    /// pixels; centred on the line, the step is placed by its area between the levels
+    /// either side alone. A long edge's share holds through such stations; a short
+    /// one's does not.
+    fn read_short_edges_at_line(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) {
+        for e in 0..t.edges.len() {
+            let n = self
+                .points
+                .iter()
+                .filter(|p| p.edge == e && p.in_view)
+                .count();
+            if n == 0 || (n - n.min(2)) as f64 >= HELD_SHARE * n as f64 {
+                continue;
+            }
+            let edge = &t.edges[e];
+            for p in self.points.iter_mut().filter(|p| p.edge == e && p.in_view) {
+                if Self::holds_final(t, pose, p) {
+                    continue;
+                }
+                let Against {
+                    residual, normal, ..
+                } = Against::new(t, pose, p);
+                let on_line = sub(p.at, scale(normal, residual));
+                let again = self
+                    .stations
+                    .locate(frame, on_line, normal, edge.polarity, 0.0)
+                    .map(|f| Point::located(e, p.tau, on_line, normal, f, edge.step));
+                if let Some(again) = again.filter(|q| Self::holds_final(t, pose, q)) {
+                    *p = again;
                 }
             }
         }

@@ -457,6 +457,31 @@ mod tests {
 
     /// The polygon `shape` (pixels from the apex) drawn as [`needle`] draws its own.
     fn body(shape: &[[f64; 2]], deg: f64, apex: [f64; 2], noise: f64, seed: u64) -> GrayImage {
+        body_at(shape, [60.0, 180.0], 0.0, deg, apex, noise, seed)
+    }
+
+    /// [`body`] at `levels` (background, probe), blurred by a Gaussian of `blur` px
+    /// (none at 0) before the noise.
+    fn body_at(
+        shape: &[[f64; 2]],
+        levels: [f64; 2],
+        blur: f32,
+        deg: f64,
+        apex: [f64; 2],
+        noise: f64,
+        seed: u64,
+    ) -> GrayImage {
+        if blur > 0.0 {
+            let clean = body_at(shape, levels, 0.0, deg, apex, 0.0, seed);
+            let mut blurred = imageproc::filter::gaussian_blur_f32(&clean, blur);
+            let flat = body_at(&[], [128.0, 128.0], 0.0, deg, apex, noise, seed);
+            for (p, n) in blurred.pixels_mut().zip(flat.pixels()) {
+                p[0] = (f64::from(p[0]) + f64::from(n[0]) - 128.0)
+                    .clamp(0.0, 255.0)
+                    .round() as u8;
+            }
+            return blurred;
+        }
         let psi = image_rad_from_screen_deg(deg);
         let poly: Vec<[f64; 2]> = shape.iter().map(|p| add(apex, rotate(*p, psi))).collect();
         let inside = |x: f64, y: f64| {
@@ -489,9 +514,11 @@ mod tests {
                 }
             }
             let gauss = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
-            image::Luma([(60.0 + 120.0 * cover + noise * gauss)
-                .clamp(0.0, 255.0)
-                .round() as u8])
+            image::Luma([
+                (levels[0] + (levels[1] - levels[0]) * cover + noise * gauss)
+                    .clamp(0.0, 255.0)
+                    .round() as u8,
+            ])
         })
     }
 
@@ -739,6 +766,42 @@ mod tests {
             overlay.pixels().any(|p| *p == fourth),
             "the fourth edge is drawn"
         );
+    }
+
+    /// A faint needle (36 levels over its background, blurred by 1.6 px) under noise
+    /// of 30, each of 64 frames fitted from its true pose. A station finds its step
+    /// where a noise-driven rise is largest, often pixels off, and two of the blunt
+    /// end's three misplaced refuse it; read again centred on the fitted end, they hold
+    /// it. No frame is refused for its end's stations missing (4 are without the
+    /// second reading), and at most 3 in all (6 without).
+    #[test]
+    fn a_faint_blunt_end_holds_under_noise_as_large_as_its_step() {
+        let shape = [[-400.0, -30.0], [0.0, 0.0], [0.0, 12.0], [-400.0, 60.0]];
+        let apex = [250.0, 100.0];
+        let levels = [100.0, 136.0];
+        let reference = body_at(&shape, levels, 1.6, 0.0, apex, 2.0, 1);
+        let template = calibrate(&reference, &clicks(apex), ["upper", "end"]).unwrap();
+        let mut tracker = RigidTracker::new(template, 20.0);
+        let missed: Vec<(u64, Option<Miss>)> = (0..64u64)
+            .map(|seed| {
+                let deg = -10.0 + 20.0 * (seed as f64 / 63.0);
+                let at = [
+                    235.0 + (seed % 5) as f64 * 5.0,
+                    90.0 + (seed % 3) as f64 * 10.0,
+                ];
+                let frame = body_at(&shape, levels, 1.6, deg, at, 30.0, 100 + seed);
+                let truth = Pose {
+                    psi: image_rad_from_screen_deg(deg),
+                    scale: 1.0,
+                    apex: at,
+                };
+                (seed, tracker.track_from(&frame, truth).miss)
+            })
+            .filter(|(_, miss)| miss.is_some())
+            .collect();
+        let end = Some(Miss::EdgeMissing(EdgeName::intern("end")));
+        assert!(!missed.iter().any(|(_, m)| *m == end), "{missed:?}");
+        assert!(missed.len() <= 3, "{missed:?}");
     }
 
     #[test]

@@ -46,8 +46,8 @@ pub struct Stations {
 
 impl Stations {
     /// The step of polarity `polarity` nearest in strength to the edge's, within
-    /// `reach` pixels of `at` along the inward unit normal `normal`. `None` when the
-    /// profile leaves the frame.
+    /// `reach` pixels of `at` along the inward unit normal `normal` (with `reach` 0,
+    /// the step read centred on `at`). `None` when the profile leaves the frame.
     pub fn locate(
         &mut self,
         frame: &GrayImage,
