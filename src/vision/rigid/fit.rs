@@ -59,6 +59,12 @@ const HOLD_SHARE: f64 = 0.1;
 /// (tool seed 7).
 const STEP_SHARE: f64 = 0.2;
 const HELD_PX: f64 = 1.5;
+/// A station stepping by less than this share of the calibrated step, off its line at
+/// the apex's corner, is read again centred on the line ([`Fitter::shown_off`]). A
+/// stronger step lies where the frame puts it: a gripper jaw's end laid along a
+/// needle's steps by 0.9-1.2 of it 1.5-1.9 px off, and centred on the line (whose
+/// window then holds the step at its border) it read 1.0-1.1 px off (tool seed 7).
+const WEAK_STEP_SHARE: f64 = 0.5;
 /// The levels on the probe's side of its edges in view lie within this share of the
 /// smallest calibrated step: one body.
 const ONE_BODY_SHARE: f64 = 0.5;
@@ -705,7 +711,9 @@ impl Fitter {
     /// does not): where it steps as the edge does by [`STEP_SHARE`] of the calibrated
     /// step, or, beyond [`HELD_PX`], where it steps the other way by as much against a
     /// neighbour brighter than the probe where the probe is the brighter (darker where
-    /// it is darker): the tip's outline where it touches a particle.
+    /// it is darker): the tip's outline where it touches a particle; or, for a step
+    /// weaker than [`WEAK_STEP_SHARE`], where the station read centred on the line
+    /// places it.
     fn shown_off(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
         let own = Self::step_off(t, pose, p);
         if own <= HELD_PX || !p.in_view {
@@ -725,7 +733,22 @@ impl Fitter {
                     &Point::located(p.edge, p.tau, q, normal, f, edge.step),
                 )
             });
-        own.min(outline)
+        // A weak step, off the line, read again centred on it: where the step is as
+        // small as the noise, its largest rise is the noise's to place.
+        let centred = if p.step < WEAK_STEP_SHARE {
+            self.stations
+                .locate(frame, q, normal, edge.polarity, 0.0)
+                .map_or(f64::INFINITY, |f| {
+                    Self::step_off(
+                        t,
+                        pose,
+                        &Point::located(p.edge, p.tau, q, normal, f, edge.step),
+                    )
+                })
+        } else {
+            f64::INFINITY
+        };
+        own.min(outline).min(centred)
     }
 
     /// Every station past a closed end of edge `e` holds it, with the probe's `level`
