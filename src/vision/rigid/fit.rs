@@ -362,24 +362,37 @@ impl Fitter {
             if n == 0 || (n - n.min(2)) as f64 >= HELD_SHARE * n as f64 {
                 continue;
             }
-            let edge = &t.edges[e];
-            for p in self.points.iter_mut().filter(|p| p.edge == e && p.in_view) {
-                if Self::holds_final(t, pose, p) {
+            for i in 0..self.points.len() {
+                let p = self.points[i];
+                if p.edge != e || !p.in_view || Self::holds_final(t, pose, &p) {
                     continue;
                 }
-                let Against {
-                    residual, normal, ..
-                } = Against::new(t, pose, p);
-                let on_line = sub(p.at, scale(normal, residual));
-                let again = self
-                    .stations
-                    .locate(frame, on_line, normal, edge.polarity, 0.0)
-                    .map(|f| Point::located(e, p.tau, on_line, normal, f, edge.step));
+                let again = self.read_again(frame, t, pose, &p, 1.0, 0.0);
                 if let Some(again) = again.filter(|q| Self::holds_final(t, pose, q)) {
-                    *p = again;
+                    self.points[i] = again;
                 }
             }
         }
+    }
+
+    /// Station `p` of an edge read again from its place on the edge at `pose`: the
+    /// step of `polarity` times the edge's within `reach` pixels of the line (with
+    /// `reach` 0, centred on it).
+    fn read_again(
+        &mut self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: &Pose,
+        p: &Point,
+        polarity: f64,
+        reach: f64,
+    ) -> Option<Point> {
+        let edge = &t.edges[p.edge];
+        let normal = rotate(edge.normal, pose.psi);
+        let q = pose.place(edge, p.tau);
+        self.stations
+            .locate(frame, q, normal, polarity * edge.polarity, reach)
+            .map(|f| Point::located(p.edge, p.tau, q, normal, f, edge.step))
     }
 
     /// Signed distance of a station's point from its edge's line at `pose`.
@@ -719,32 +732,13 @@ impl Fitter {
         if own <= HELD_PX || !p.in_view {
             return own;
         }
-        let edge = &t.edges[p.edge];
-        let normal = rotate(edge.normal, pose.psi);
-        let q = pose.place(edge, p.tau);
+        let off = |read: Option<Point>| read.map_or(f64::INFINITY, |q| Self::step_off(t, pose, &q));
         let reach = REACHES[REACHES.len() - 1];
-        let outline = self
-            .stations
-            .locate(frame, q, normal, -edge.polarity, reach)
-            .map_or(f64::INFINITY, |f| {
-                Self::step_off(
-                    t,
-                    pose,
-                    &Point::located(p.edge, p.tau, q, normal, f, edge.step),
-                )
-            });
+        let outline = off(self.read_again(frame, t, pose, p, -1.0, reach));
         // A weak step, off the line, read again centred on it: where the step is as
         // small as the noise, its largest rise is the noise's to place.
         let centred = if p.step < WEAK_STEP_SHARE {
-            self.stations
-                .locate(frame, q, normal, edge.polarity, 0.0)
-                .map_or(f64::INFINITY, |f| {
-                    Self::step_off(
-                        t,
-                        pose,
-                        &Point::located(p.edge, p.tau, q, normal, f, edge.step),
-                    )
-                })
+            off(self.read_again(frame, t, pose, p, 1.0, 0.0))
         } else {
             f64::INFINITY
         };
