@@ -12,7 +12,9 @@
 //! than the probe while its inside keeps the probe's level is not counted against it),
 //! or when the two stations nearest its corner (the apex, the beam's free end) do not
 //! both show it: a tip hidden under a patch has no faces there (a face may lose its
-//! corner to a particle beside it while the apex shows the surroundings beyond it).
+//! corner to a particle beside it while the apex shows the surroundings beyond it),
+//! or when a face's line steps on past the apex from the level of its far side: the
+//! border of a patch over the tip, meeting a face where the apex should be.
 //! It steps the wrong way
 //! (`Miss::WrongAppearance`) when its median ratio is negative; a face whose last two
 //! stations toward its base show nothing is longer than the probe's at this scale, or
@@ -170,6 +172,18 @@ impl Profile {
         (0..END_STATIONS).all(|k| self.at_probe_level(k, probe_level))
     }
 
+    /// Median level on the far side of the edge over the stations that show it (at
+    /// least one must).
+    fn outside_level(&self) -> f64 {
+        let mut outside = [0.0; STATIONS];
+        let mut m = 0;
+        for k in (0..self.stations).filter(|&k| self.held(k)) {
+            outside[m] = self.inside[k] - self.ratio[k] * self.step;
+            m += 1;
+        }
+        median(&outside, m.max(1))
+    }
+
     /// Median level on the probe's side over the stations that show the edge.
     fn held_level(&self) -> f64 {
         let mut held_inside = [0.0; STATIONS];
@@ -253,12 +267,10 @@ fn station_span(
     }
     let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
     let reach = s.reach();
-    let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
-    let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
     let (trim_corner, trim_far) = if e == RED {
         (reach + 1.0, 1.0)
     } else {
-        (reach / sin_apex + 1.0, 1.5 * reach + 2.0)
+        (corner_trim(t, s), 1.5 * reach + 2.0)
     };
     let (a, b) = clip_inside(tip, dir, size, reach + 1.0)?;
     let (a0, b0) = (a.max(trim_corner), b.min(len - trim_far));
@@ -267,6 +279,14 @@ fn station_span(
     }
     let at = |d: f64| [tip[0] + d * dir[0], tip[1] + d * dir[1]];
     Some((at(a0), at(b0), a <= trim_corner))
+}
+
+/// How far from the apex a station on a face's line (either way) samples clear of
+/// the partner face, pixels.
+fn corner_trim(t: &Template, s: &Sampling) -> f64 {
+    let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
+    let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
+    s.reach() / sin_apex + 1.0
 }
 
 /// A stretch of an edge checked by stations: its two ends, frame pixels.
@@ -502,6 +522,14 @@ pub fn check_edges(
     if hidden > 0 && apex_covered(frame, t, pose, &s, &faces) {
         return Some(Miss::EdgeMissing(Edge::Blue.into()));
     }
+    // A face that is a border running on past the apex: the tip under a patch.
+    for (e, face) in faces.iter().enumerate() {
+        if let Some((_, p, _)) = face {
+            if runs_on_past_apex(frame, t, pose, e, size, &s, p) {
+                return Some(Miss::EdgeMissing(Edge::ALL[e].into()));
+            }
+        }
+    }
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red.into()));
     }
@@ -554,6 +582,54 @@ pub fn check_edges(
         }
     }
     None
+}
+
+/// A face's line steps on past the apex when its step keeps, at every station there,
+/// the level of the face's far side within this share of the calibrated step.
+const RUN_ON_OUTSIDE: f64 = 0.25;
+
+/// Whether face `e` (its stations `face`) is a border running on past the apex: along
+/// its line beyond the apex, from where the partner face is clear (the corner's trim)
+/// for as far as the face is long, every station steps the face's way
+/// ([`HOLD_RATIO`]) from the level of the face's far side ([`RUN_ON_OUTSIDE`]).
+/// Beyond a probe's apex both sides of a face's line are the surroundings; the border
+/// of a patch over the tip, meeting a face where the apex should be, goes on between
+/// the patch and the surroundings.
+fn runs_on_past_apex(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    size: [f64; 2],
+    s: &Sampling,
+    face: &Profile,
+) -> bool {
+    let (tip, far) = t.segment(pose, e);
+    let len = norm(sub(far, tip));
+    if len < MIN_CHECKED_PX {
+        return false;
+    }
+    let dir = scale(sub(tip, far), 1.0 / len);
+    let trim = corner_trim(t, s);
+    let Some((a, b)) = clip_inside(tip, dir, size, s.reach() + 1.0) else {
+        return false;
+    };
+    let (a0, b0) = (a.max(trim), b.min(len));
+    if a > trim || b0 - a0 < MIN_CHECKED_PX {
+        return false;
+    }
+    let at = |d: f64| add(tip, scale(dir, d));
+    let past = profile(
+        frame,
+        &t.line(pose, e),
+        (at(a0), at(b0)),
+        None,
+        s,
+        face.step,
+    );
+    past.stations == STATIONS
+        && (0..STATIONS).all(|k| past.held(k))
+        && (past.outside_level() - face.outside_level()).abs() <= RUN_ON_OUTSIDE * face.step.abs()
 }
 
 /// Past the apex, a level this share of the way from the surroundings' to the
@@ -1434,6 +1510,41 @@ mod tests {
         }
         assert_eq!(check(&touching), None);
         assert_eq!(check(&over), Some(Miss::EdgeMissing(Edge::Blue.into())));
+    }
+
+    #[test]
+    fn a_border_running_on_past_the_apex_is_not_a_face() {
+        // The toy pyramid pointing down under its beam, and a patch darker than the
+        // ground beside its back face: up to the apex, or on past it as the border of
+        // a patch over a tip would run.
+        let t = toy_under_beam();
+        let pose = Pose {
+            psi: 0.0,
+            scale: 2.5,
+            apex: [220.0, 250.0],
+        };
+        let blue = t.line(&pose, BLUE);
+        let (tip, base) = t.segment(&pose, BLUE);
+        let up = sub(base, tip);
+        let with_patch = |past_apex: bool| {
+            let mut frame = probe_frame(&t, &pose, 0.0, true);
+            for (x, y, px) in frame.enumerate_pixels_mut() {
+                let p = [f64::from(x), f64::from(y)];
+                // Along the face from its base, to the apex or on past it.
+                let along = dot(sub(p, tip), up) / dot(up, up);
+                if blue.depth(p) < 0.0 && along <= 1.0 && (past_apex || along >= 0.0) {
+                    px.0 = [20];
+                }
+            }
+            frame
+        };
+        let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [true; 3]);
+        assert_eq!(check(&probe_frame(&t, &pose, 0.0, true)), None);
+        assert_eq!(check(&with_patch(false)), None);
+        assert_eq!(
+            check(&with_patch(true)),
+            Some(Miss::EdgeMissing(Edge::Blue.into()))
+        );
     }
 
     #[test]
