@@ -1207,6 +1207,10 @@ const END_RATIO: f64 = 0.2;
 const OVERHANG_SHOWN: usize = 3;
 /// Shortest stretch of the overhang that is checked, pixels.
 const MIN_OVERHANG_PX: f64 = 4.0;
+/// Behind an overhang too short to check, the end face below the corner is judged on
+/// the stations whose samples on the beam's side lie clear of the front face, when at
+/// least this many (half of [`STATIONS`]) do.
+const SHORT_OVERHANG_STATIONS: usize = STATIONS / 2;
 /// Half width of the runs either side of a candidate end face, pixels.
 const END_RUN_PX: usize = 3;
 /// Rows of the beam's band averaged at each position of the end face's search.
@@ -1224,7 +1228,9 @@ const END_SEARCH_MAX: usize = 120;
 /// step carries on below the corner, over the next beam thickness, on [`HELD_SHARE`]
 /// of its stations. Refused as `Miss::ScaleMismatch` when both hold: a particle at
 /// the probe's level at the free end hides the overhang and steps beside the end
-/// face's line, but not along that much of it. The free end itself is not refused
+/// face's line, but not along that much of it. An overhang too short to check
+/// leaves the end face alone to tell, on the stations whose samples on the beam's
+/// side lie clear of the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free end itself is not refused
 /// when its step is missing: a bright textured background beyond it takes the step
 /// away as often as a beam running on.
 fn free_end(
@@ -1253,8 +1259,6 @@ fn free_end(
     if step < END_RATIO {
         return None;
     }
-    // The overhang, long enough to keep the pyramid clear of the samples behind the
-    // end face's line.
     let (lower, lower_sampling) = lower_face_line(red, beam_px, s);
     let base = lower.intersect(&t.line(pose, GREEN))?;
     let end = add(free, scale(out, at));
@@ -1263,28 +1267,29 @@ fn free_end(
         inside_px: 3.0,
         ..*s
     };
-    if overhang < sampling.reach() + 2.0 {
-        return None;
-    }
-    // The overhang's lower face, from where the front face's line meets it to the end.
+    // The overhang's lower face, from where the front face's line meets it to the end,
+    // where it is long enough to keep the pyramid clear of the samples behind the end
+    // face's line.
     let (a0, b0) = (2.0, overhang - 2.0);
-    if b0 - a0 < MIN_OVERHANG_PX {
-        return None;
-    }
-    let p = profile(
-        frame,
-        &lower,
-        (add(base, scale(out, a0)), add(base, scale(out, b0))),
-        None,
-        &lower_sampling,
-        red_step,
-    );
+    let short = overhang < sampling.reach() + 2.0 || b0 - a0 < MIN_OVERHANG_PX;
     let shown = |p: &Profile| (0..p.stations).filter(|&k| p.ratio[k] >= END_RATIO).count();
-    if p.stations < STATIONS || shown(&p) >= OVERHANG_SHOWN {
-        return None;
+    if !short {
+        let p = profile(
+            frame,
+            &lower,
+            (add(base, scale(out, a0)), add(base, scale(out, b0))),
+            None,
+            &lower_sampling,
+            red_step,
+        );
+        if p.stations < STATIONS || shown(&p) >= OVERHANG_SHOWN {
+            return None;
+        }
     }
     // Below the block's corner, along the end face's line: the surroundings on both
-    // sides for this probe, the rest of the end face for a thicker beam.
+    // sides for this probe, the rest of the end face for a thicker beam. Behind a
+    // short overhang the front face runs along that line: the samples on the beam's
+    // side are taken only clear of the front face's predicted line.
     let face = Line::through(end, [-out[0], -out[1]]);
     let (a, b) = (beam_px + s.margin_px + 2.0, 2.0 * beam_px);
     let size = [frame.width() as f64, frame.height() as f64];
@@ -1293,6 +1298,11 @@ fn free_end(
     if b0 - a0 < MIN_CHECKED_PX {
         return None;
     }
+    let front = t.line(pose, GREEN);
+    let clear_of_front = Line {
+        normal: scale(front.normal, -1.0),
+        rho: -front.rho,
+    };
     let q = profile(
         frame,
         &face,
@@ -1300,11 +1310,16 @@ fn free_end(
             add(end, scale(red.normal, a0)),
             add(end, scale(red.normal, b0)),
         ),
-        None,
+        short.then_some(&clear_of_front),
         &sampling,
         red_step,
     );
-    (q.stations == STATIONS && shown(&q) as f64 >= HELD_SHARE * STATIONS as f64)
+    let judged = if short {
+        SHORT_OVERHANG_STATIONS
+    } else {
+        STATIONS
+    };
+    (q.stations >= judged && shown(&q) as f64 >= HELD_SHARE * q.stations as f64)
         .then_some(Miss::ScaleMismatch)
 }
 
@@ -1545,6 +1560,38 @@ mod tests {
             check(&with_patch(true)),
             Some(Miss::EdgeMissing(Edge::Blue.into()))
         );
+    }
+
+    #[test]
+    fn a_thicker_beam_shows_below_the_corner_behind_a_short_overhang() {
+        // The toy pyramid with a front face 5 deg from the vertical and its beam's free
+        // end 5 reference pixels from the apex's foot: the front face meets the beam's
+        // lower face 1.5 reference pixels before the free end, too short an overhang to
+        // check, and runs 4-6 px from the end face's line below the corner, where the
+        // end face's samples on the beam's side lie. The probe as calibrated (a beam
+        // 10 reference pixels thick) and one whose beam is 2.5 times thicker: only
+        // samples clear of the front face tell them apart.
+        let mut t = toy_under_beam();
+        let (sin, cos) = 5f64.to_radians().sin_cos();
+        t.edges[GREEN].normal = [-cos, -sin];
+        t.edges[RED].tip_tau = 5.0;
+        let pose = Pose {
+            psi: 0.1,
+            scale: 2.5,
+            apex: [200.0, 230.0],
+        };
+        let red = t.line(&pose, RED);
+        let s = Sampling::new(1.0, t.beam_px.unwrap() * pose.scale);
+        let thicker = Template {
+            beam_px: Some(25.0),
+            ..t
+        };
+        let free_end_of = |drawn: &Template| {
+            let frame = probe_frame(drawn, &pose, 0.0, true);
+            free_end(&frame, &t, &pose, &red, &s, 150.0)
+        };
+        assert_eq!(free_end_of(&t), None);
+        assert_eq!(free_end_of(&thicker), Some(Miss::ScaleMismatch));
     }
 
     #[test]
