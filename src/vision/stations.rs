@@ -175,26 +175,23 @@ impl Profile {
     /// Median level on the far side of the edge over the stations that show it (at
     /// least one must).
     fn outside_level(&self) -> f64 {
-        let mut outside = [0.0; STATIONS];
-        let mut m = 0;
-        for k in (0..self.stations).filter(|&k| self.held(k)) {
-            outside[m] = self.inside[k] - self.ratio[k] * self.step;
-            m += 1;
-        }
-        median(&outside, m.max(1))
+        self.held_median(|k| self.inside[k] - self.ratio[k] * self.step)
     }
 
     /// Median level on the probe's side over the stations that show the edge.
     fn held_level(&self) -> f64 {
-        let mut held_inside = [0.0; STATIONS];
+        self.held_median(|k| self.inside[k])
+    }
+
+    /// Median of `value` over the stations that show the edge (0 when none does).
+    fn held_median(&self, value: impl Fn(usize) -> f64) -> f64 {
+        let mut held = [0.0; STATIONS];
         let mut m = 0;
-        for k in 0..self.stations {
-            if self.held(k) {
-                held_inside[m] = self.inside[k];
-                m += 1;
-            }
+        for k in (0..self.stations).filter(|&k| self.held(k)) {
+            held[m] = value(k);
+            m += 1;
         }
-        median(&held_inside, m.max(1))
+        median(&held, m.max(1))
     }
 
     /// Why this profile is not edge `edge` of the probe, if it is not (a face's
@@ -267,17 +264,32 @@ fn station_span(
     }
     let dir = [(far[0] - tip[0]) / len, (far[1] - tip[1]) / len];
     let reach = s.reach();
-    let (trim_corner, trim_far) = if e == RED {
+    let trims = if e == RED {
         (reach + 1.0, 1.0)
     } else {
         (corner_trim(t, s), 1.5 * reach + 2.0)
     };
-    let (a, b) = clip_inside(tip, dir, size, reach + 1.0)?;
+    stretch(tip, dir, len, trims, size, s)
+}
+
+/// The part of the line from `corner` along the unit `dir`, `len` pixels long, that
+/// stations check: `trims` (at the corner, at the far end) cut off and the rest clipped
+/// to where their samples stay in a frame of `size`; with whether the corner end is
+/// in view.
+fn stretch(
+    corner: [f64; 2],
+    dir: [f64; 2],
+    len: f64,
+    (trim_corner, trim_far): (f64, f64),
+    size: [f64; 2],
+    s: &Sampling,
+) -> Option<([f64; 2], [f64; 2], bool)> {
+    let (a, b) = clip_inside(corner, dir, size, s.reach() + 1.0)?;
     let (a0, b0) = (a.max(trim_corner), b.min(len - trim_far));
     if b0 - a0 < MIN_CHECKED_PX {
         return None;
     }
-    let at = |d: f64| [tip[0] + d * dir[0], tip[1] + d * dir[1]];
+    let at = |d: f64| add(corner, scale(dir, d));
     Some((at(a0), at(b0), a <= trim_corner))
 }
 
@@ -610,23 +622,10 @@ fn runs_on_past_apex(
         return false;
     }
     let dir = scale(sub(tip, far), 1.0 / len);
-    let trim = corner_trim(t, s);
-    let Some((a, b)) = clip_inside(tip, dir, size, s.reach() + 1.0) else {
+    let Some((a, b, true)) = stretch(tip, dir, len, (corner_trim(t, s), 0.0), size, s) else {
         return false;
     };
-    let (a0, b0) = (a.max(trim), b.min(len));
-    if a > trim || b0 - a0 < MIN_CHECKED_PX {
-        return false;
-    }
-    let at = |d: f64| add(tip, scale(dir, d));
-    let past = profile(
-        frame,
-        &t.line(pose, e),
-        (at(a0), at(b0)),
-        None,
-        s,
-        face.step,
-    );
+    let past = profile(frame, &t.line(pose, e), (a, b), None, s, face.step);
     past.stations == STATIONS
         && (0..STATIONS).all(|k| past.held(k))
         && (past.outside_level() - face.outside_level()).abs() <= RUN_ON_OUTSIDE * face.step.abs()
@@ -1230,9 +1229,9 @@ const END_SEARCH_MAX: usize = 120;
 /// the probe's level at the free end hides the overhang and steps beside the end
 /// face's line, but not along that much of it. An overhang too short to check
 /// leaves the end face alone to tell, on the stations whose samples on the beam's
-/// side lie clear of the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free end itself is not refused
-/// when its step is missing: a bright textured background beyond it takes the step
-/// away as often as a beam running on.
+/// side lie clear of the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free
+/// end itself is not refused when its step is missing: a bright textured background
+/// beyond it takes the step away as often as a beam running on.
 fn free_end(
     frame: &GrayImage,
     t: &Template,
