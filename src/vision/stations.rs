@@ -625,10 +625,59 @@ fn runs_on_past_apex(
     let Some((a, b, true)) = stretch(tip, dir, len, (corner_trim(t, s), 0.0), size, s) else {
         return false;
     };
-    let past = profile(frame, &t.line(pose, e), (a, b), None, s, face.step);
+    let line = t.line(pose, e);
+    let past = profile(frame, &line, (a, b), None, s, face.step);
     past.stations == STATIONS
         && (0..STATIONS).all(|k| past.held(k))
         && (past.outside_level() - face.outside_level()).abs() <= RUN_ON_OUTSIDE * face.step.abs()
+        && wide_past_line(frame, &line, (a, b), s, &past)
+}
+
+/// Past the line's inside samples, this many pixels on, and this many rows deep, the
+/// level that tells a body's border from a line along it.
+const DEEP_GAP_PX: f64 = 1.0;
+const DEEP_ROWS: i64 = 3;
+/// A body past a line holds this share of its step at that depth.
+const DEEP_SHARE: f64 = 0.5;
+
+/// Whether what steps along `line` over `(a, b)` (its stations `past`) is a border
+/// between two wide regions: deeper on its inside than its inside samples, past a
+/// gap, the median station keeps at least [`DEEP_SHARE`] of its step. Both sides of
+/// a patch's border are wide; a thin line read as the inside (a scratch running on
+/// from a face through the apex) is back to its far side's level there.
+fn wide_past_line(
+    frame: &GrayImage,
+    line: &Line,
+    span: Span,
+    s: &Sampling,
+    past: &Profile,
+) -> bool {
+    let place = Placement::new(span);
+    let (dir, n) = (place.dir, line.normal);
+    let first = s.margin_px + s.inside_px.round() + DEEP_GAP_PX;
+    let mut shares = [0.0; STATIONS];
+    for (k, share) in shares.iter_mut().enumerate().take(past.stations) {
+        let centre = place.centre(line, k);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for j in -place.along..=place.along {
+            for d in 0..DEEP_ROWS {
+                let depth = first + d as f64;
+                let p = add(add(centre, scale(dir, j as f64)), scale(n, depth));
+                if let Some(v) = grey(frame, p) {
+                    sum += v;
+                    count += 1;
+                }
+            }
+        }
+        let step = past.ratio[k] * past.step;
+        let outside = past.inside[k] - step;
+        *share = if count == 0 {
+            0.0
+        } else {
+            (sum / count as f64 - outside) / step
+        };
+    }
+    median(&shares, past.stations.max(1)) >= DEEP_SHARE
 }
 
 /// Past the apex, a level this share of the way from the surroundings' to the
@@ -1559,6 +1608,17 @@ mod tests {
             check(&with_patch(true)),
             Some(Miss::EdgeMissing(Edge::Blue.into()))
         );
+        // A scratch at the probe's level, 3 px wide, running on from the face along
+        // its line past the apex: a line, not a border.
+        let mut scratched = probe_frame(&t, &pose, 0.0, true);
+        for (x, y, px) in scratched.enumerate_pixels_mut() {
+            let p = [f64::from(x), f64::from(y)];
+            let along = dot(sub(p, tip), up) / dot(up, up);
+            if (0.0..3.0).contains(&blue.depth(p)) && (-1.0..0.0).contains(&along) {
+                px.0 = [200];
+            }
+        }
+        assert_eq!(check(&scratched), None);
     }
 
     #[test]
