@@ -6,8 +6,9 @@
 //! One test per binary on purpose: it switches the process-wide choice back and forth.
 mod tracker_support;
 
-use nanoforce::scene;
-use nanoforce::vision::{set_avx2, Tracker};
+use image::GrayImage;
+use nanoforce::scene::{self, render_tool_into, tool_suite, ToolKind};
+use nanoforce::vision::{calibrate_rigid, set_avx2, RigidTracker, Tracker};
 use tracker_support::rendered;
 
 /// Debug output round-trips every f64, so equal text means equal bits.
@@ -43,4 +44,36 @@ fn avx2_and_portable_loops_agree_to_the_bit() {
     }
     set_avx2(true);
     assert!(frames >= 50, "only {frames} frames detected");
+
+    // Every rigid tool, searched whole and fitted from the last pose (its stations
+    // read by gathers or one pixel at a time).
+    let mut tools = 0;
+    for kind in ToolKind::ALL {
+        let session = &tool_suite(kind, 17, 1, 12, 0)[0];
+        let render = |spec| {
+            let mut frame = GrayImage::new(1, 1);
+            render_tool_into(spec, &[], &mut frame);
+            frame
+        };
+        let clicks: Vec<(String, Vec<[f64; 2]>)> = session
+            .clicks
+            .iter()
+            .map(|(n, p)| (n.to_string(), p.clone()))
+            .collect();
+        let template = calibrate_rigid(&render(&session.reference), &clicks, session.apex)
+            .expect("the rendered reference calibrates");
+        let mut fast = RigidTracker::new(template.clone(), 20.0);
+        let mut portable = RigidTracker::new(template, 20.0);
+        for spec in &session.frames {
+            let frame = render(spec);
+            set_avx2(true);
+            let a = fast.track(&frame);
+            set_avx2(false);
+            let b = portable.track(&frame);
+            assert_eq!(bits(&a), bits(&b), "{} {spec:?}", kind.name());
+            tools += a.detected as usize;
+        }
+    }
+    set_avx2(true);
+    assert!(tools >= 24, "only {tools} tool frames detected");
 }

@@ -93,20 +93,37 @@ pub fn strip_mean(
 }
 
 /// Bilinear grey level of `img` at `p`, `None` outside its pixel centres.
+#[inline]
 pub fn bilinear(img: &image::GrayImage, p: [f64; 2]) -> Option<f64> {
+    inside_centres(img, p).then(|| bilinear_inside(img, p))
+}
+
+/// Whether `p` lies within `img`'s pixel centres (where [`bilinear_inside`] reads).
+#[inline]
+pub fn inside_centres(img: &image::GrayImage, p: [f64; 2]) -> bool {
+    let (w, h) = (img.width(), img.height());
+    w > 0
+        && h > 0
+        && p[0] >= 0.0
+        && p[1] >= 0.0
+        && p[0] <= f64::from(w - 1)
+        && p[1] <= f64::from(h - 1)
+}
+
+/// Bilinear grey level of `img` at `p`, which must lie within its pixel centres
+/// ([`inside_centres`]; outside, the read is clamped to the image, never out of it).
+#[inline(always)]
+pub fn bilinear_inside(img: &image::GrayImage, p: [f64; 2]) -> f64 {
     let (w, h) = (img.width() as usize, img.height() as usize);
-    let (x, y) = (p[0], p[1]);
-    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    // Truncation is the floor for the non-negative coordinates inside.
+    let (x0, y0) = ((p[0] as usize).min(w - 1), (p[1] as usize).min(h - 1));
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let (fx, fy) = (p[0] - x0 as f64, p[1] - y0 as f64);
     let raw = img.as_raw();
     let v = |xx: usize, yy: usize| f64::from(raw[yy * w + xx]);
     let top = v(x0, y0) + fx * (v(x1, y0) - v(x0, y0));
     let bottom = v(x0, y1) + fx * (v(x1, y1) - v(x0, y1));
-    Some(top + fy * (bottom - top))
+    top + fy * (bottom - top)
 }
 
 /// Rotates `v` by an image angle.

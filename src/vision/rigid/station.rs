@@ -5,7 +5,8 @@
 //! The profile is read at half-pixel spacing across the line; each sample averages
 //! [`RUN`] bilinear reads one pixel apart along it, which cuts the noise by about
 //! `sqrt(RUN)` while a pose within a degree moves the run's ends by a few hundredths
-//! of a pixel. The step is found at the largest signed derivative over one pixel
+//! of a pixel (four samples are read at a time with AVX2 gathers where the CPU has
+//! them, to the bit as one at a time). The step is found at the largest signed derivative over one pixel
 //! either side; its size is the mean level on the probe's side minus the mean outside,
 //! both read clear of the blur, and it is placed by its area between them (unbiased
 //! for any symmetric blur, where a derivative peak of interpolated samples leans
@@ -13,7 +14,7 @@
 
 use image::GrayImage;
 
-use crate::vision::geometry::{add, along, bilinear, scale};
+use crate::vision::geometry::{add, along, bilinear_inside, inside_centres, scale};
 
 /// Samples averaged along the edge per profile point, one pixel apart.
 pub(super) const RUN: usize = 7;
@@ -60,14 +61,8 @@ impl Stations {
         let lo = -(reach + LEVEL_FAR);
         let count = (2.0 * (reach + LEVEL_FAR) / DT).round() as usize + 1;
         self.profile.clear();
-        let half = (RUN / 2) as f64;
-        for i in 0..count {
-            let centre = add(at, scale(normal, lo + i as f64 * DT));
-            let mut sum = 0.0;
-            for j in 0..RUN {
-                sum += bilinear(frame, add(centre, scale(tangent, j as f64 - half)))?;
-            }
-            self.profile.push(sum / RUN as f64);
+        if !read_profile(frame, at, normal, tangent, lo, count, &mut self.profile) {
+            return None;
         }
         let p = &self.profile;
         let d = |i: usize| polarity * (p[i + HALF_SPAN] - p[i - HALF_SPAN]);
@@ -110,6 +105,137 @@ impl Stations {
             step: polarity * (inside - outside),
             inside,
         })
+    }
+}
+
+/// The sample `j` along the edge of profile point `i` (see [`read_profile`]).
+#[inline(always)]
+fn sample_at(
+    at: [f64; 2],
+    normal: [f64; 2],
+    tangent: [f64; 2],
+    lo: f64,
+    i: usize,
+    j: usize,
+) -> [f64; 2] {
+    let centre = add(at, scale(normal, lo + i as f64 * DT));
+    add(centre, scale(tangent, j as f64 - (RUN / 2) as f64))
+}
+
+/// Fills `profile` with `count` points across the line through `at`, from `lo` along
+/// `normal` at [`DT`] spacing, each the mean of [`RUN`] bilinear reads one pixel apart
+/// along `tangent`; false (and `profile` unfilled) when a read would leave the frame's
+/// pixel centres.
+fn read_profile(
+    frame: &GrayImage,
+    at: [f64; 2],
+    normal: [f64; 2],
+    tangent: [f64; 2],
+    lo: f64,
+    count: usize,
+    profile: &mut Vec<f64>,
+) -> bool {
+    let read = |i: usize, j: usize| sample_at(at, normal, tangent, lo, i, j);
+    // The samples fill a parallelogram: inside the frame when its corners are.
+    let corners =
+        [(0, 0), (0, RUN - 1), (count - 1, 0), (count - 1, RUN - 1)].map(|(i, j)| read(i, j));
+    if !corners.iter().all(|&c| inside_centres(frame, c)) {
+        return false;
+    }
+    profile.resize(count, 0.0);
+    #[cfg(target_arch = "x86_64")]
+    if crate::vision::simd::avx2() && gather_safe(frame, &corners) {
+        // SAFETY: the CPU runs AVX2 (asked at run time), and every four-byte read of
+        // the gathers lies in the frame ([`gather_safe`]).
+        unsafe { gathered::read_profile(frame, at, normal, tangent, lo, profile) };
+        return true;
+    }
+    for (i, level) in profile.iter_mut().enumerate() {
+        let sum: f64 = (0..RUN).map(|j| bilinear_inside(frame, read(i, j))).sum();
+        *level = sum / RUN as f64;
+    }
+    true
+}
+
+/// Whether every read of a profile with these corners keeps the gathers' four-byte
+/// loads (a pixel, its right neighbour and two more, on its row and the one below)
+/// inside the frame: the corners four columns or more from the right and two rows or
+/// more from the bottom (the reads between them stray from the corners' hull by
+/// rounding only, far less than a pixel), and every byte's index an `i32`.
+#[cfg(target_arch = "x86_64")]
+fn gather_safe(frame: &GrayImage, corners: &[[f64; 2]; 4]) -> bool {
+    let (w, h) = (f64::from(frame.width()), f64::from(frame.height()));
+    i32::try_from(frame.as_raw().len()).is_ok()
+        && corners.iter().all(|c| c[0] <= w - 5.0 && c[1] <= h - 3.0)
+}
+
+/// The profile read four points at a time with AVX2 gathers, to the bit as the scalar
+/// loop reads it: the same operations in the same order on each lane, no fused
+/// multiply-add.
+#[cfg(target_arch = "x86_64")]
+mod gathered {
+    use std::arch::x86_64::*;
+
+    use image::GrayImage;
+
+    use super::{DT, RUN};
+
+    /// The profile of [`super::read_profile`] into `profile` (its length the count).
+    ///
+    /// # Safety
+    /// The CPU runs AVX2, and [`super::gather_safe`] holds for the profile's corners.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn read_profile(
+        frame: &GrayImage,
+        at: [f64; 2],
+        normal: [f64; 2],
+        tangent: [f64; 2],
+        lo: f64,
+        profile: &mut [f64],
+    ) {
+        let count = profile.len();
+        let raw: *const i32 = frame.as_raw().as_ptr().cast();
+        let row = _mm_set1_epi32(frame.width() as i32);
+        let byte = _mm_set1_epi32(0xff);
+        let (atx, aty) = (_mm256_set1_pd(at[0]), _mm256_set1_pd(at[1]));
+        let (nx, ny) = (_mm256_set1_pd(normal[0]), _mm256_set1_pd(normal[1]));
+        let (tx, ty) = (_mm256_set1_pd(tangent[0]), _mm256_set1_pd(tangent[1]));
+        // A gathered word's first two bytes: a pixel and its right neighbour.
+        let left = |word: __m128i| _mm256_cvtepi32_pd(_mm_and_si128(word, byte));
+        let right =
+            |word: __m128i| _mm256_cvtepi32_pd(_mm_and_si128(_mm_srli_epi32::<8>(word), byte));
+        for first in (0..count).step_by(4) {
+            // Four profile points; past the end, the last one again (not stored).
+            let point = |k: usize| lo + (first + k).min(count - 1) as f64 * DT;
+            let offset = _mm256_setr_pd(point(0), point(1), point(2), point(3));
+            let cx = _mm256_add_pd(atx, _mm256_mul_pd(nx, offset));
+            let cy = _mm256_add_pd(aty, _mm256_mul_pd(ny, offset));
+            let mut sum = _mm256_setzero_pd();
+            for j in 0..RUN {
+                let d = _mm256_set1_pd(j as f64 - (RUN / 2) as f64);
+                let x = _mm256_add_pd(cx, _mm256_mul_pd(tx, d));
+                let y = _mm256_add_pd(cy, _mm256_mul_pd(ty, d));
+                let (x0, y0) = (_mm256_cvttpd_epi32(x), _mm256_cvttpd_epi32(y));
+                let fx = _mm256_sub_pd(x, _mm256_cvtepi32_pd(x0));
+                let fy = _mm256_sub_pd(y, _mm256_cvtepi32_pd(y0));
+                let index = _mm_add_epi32(_mm_mullo_epi32(y0, row), x0);
+                let upper = _mm_i32gather_epi32::<1>(raw, index);
+                let lower = _mm_i32gather_epi32::<1>(raw, _mm_add_epi32(index, row));
+                let (v00, v10) = (left(upper), right(upper));
+                let (v01, v11) = (left(lower), right(lower));
+                let top = _mm256_add_pd(v00, _mm256_mul_pd(fx, _mm256_sub_pd(v10, v00)));
+                let bottom = _mm256_add_pd(v01, _mm256_mul_pd(fx, _mm256_sub_pd(v11, v01)));
+                let level = _mm256_add_pd(top, _mm256_mul_pd(fy, _mm256_sub_pd(bottom, top)));
+                sum = _mm256_add_pd(sum, level);
+            }
+            let mut out = [0.0; 4];
+            _mm256_storeu_pd(
+                out.as_mut_ptr(),
+                _mm256_div_pd(sum, _mm256_set1_pd(RUN as f64)),
+            );
+            let n = (count - first).min(4);
+            profile[first..first + n].copy_from_slice(&out[..n]);
+        }
     }
 }
 
