@@ -339,6 +339,33 @@ fn grey(frame: &GrayImage, p: [f64; 2]) -> Option<f64> {
         .then(|| f64::from(frame.get_pixel(x as u32, y as u32)[0]))
 }
 
+/// The mean grey level of a station's run (`along` pixels either side of `centre`
+/// on the unit `dir`) at each of `depths` pixels along the normal `n`; `None` when
+/// none of it is in the frame.
+fn run_level(
+    frame: &GrayImage,
+    centre: [f64; 2],
+    dir: [f64; 2],
+    n: [f64; 2],
+    along: i64,
+    depths: impl Iterator<Item = f64> + Clone,
+) -> Option<f64> {
+    let (mut sum, mut count) = (0.0, 0usize);
+    for j in -along..=along {
+        for depth in depths.clone() {
+            let p = [
+                centre[0] + j as f64 * dir[0] + depth * n[0],
+                centre[1] + j as f64 * dir[1] + depth * n[1],
+            ];
+            if let Some(v) = grey(frame, p) {
+                sum += v;
+                count += 1;
+            }
+        }
+    }
+    (count > 0).then(|| sum / count as f64)
+}
+
 /// A calibrated step to divide by: a step under one grey level counts as one of its sign.
 fn unit_step(step: f64) -> f64 {
     if step.abs() < 1.0 {
@@ -658,24 +685,11 @@ fn wide_past_line(
     let mut shares = [0.0; STATIONS];
     for (k, share) in shares.iter_mut().enumerate().take(past.stations) {
         let centre = place.centre(line, k);
-        let (mut sum, mut count) = (0.0, 0usize);
-        for j in -place.along..=place.along {
-            for d in 0..DEEP_ROWS {
-                let depth = first + d as f64;
-                let p = add(add(centre, scale(dir, j as f64)), scale(n, depth));
-                if let Some(v) = grey(frame, p) {
-                    sum += v;
-                    count += 1;
-                }
-            }
-        }
+        let depths = (0..DEEP_ROWS).map(|d| first + d as f64);
         let step = past.ratio[k] * past.step;
         let outside = past.inside[k] - step;
-        *share = if count == 0 {
-            0.0
-        } else {
-            (sum / count as f64 - outside) / step
-        };
+        *share = run_level(frame, centre, dir, n, place.along, depths)
+            .map_or(0.0, |level| (level - outside) / step);
     }
     median(&shares, past.stations.max(1)) >= DEEP_SHARE
 }
@@ -872,20 +886,9 @@ fn locate_steps(
         // Mean grey level at each depth along the normal (NaN where none is in view).
         let mut section = [f64::NAN; SECTION_MAX];
         for (i, v) in section[..width].iter_mut().enumerate() {
-            let depth = (i as i64 - half) as f64;
-            let (mut sum, mut count) = (0.0, 0usize);
-            for j in -place.along..=place.along {
-                let p = [
-                    centre[0] + j as f64 * dir[0] + depth * n[0],
-                    centre[1] + j as f64 * dir[1] + depth * n[1],
-                ];
-                if let Some(v) = grey(frame, p) {
-                    sum += v;
-                    count += 1;
-                }
-            }
-            if count > 0 {
-                *v = sum / count as f64;
+            let depth = std::iter::once((i as i64 - half) as f64);
+            if let Some(level) = run_level(frame, centre, dir, n, place.along, depth) {
+                *v = level;
             }
         }
         let mean = |from: i64, to: i64| -> f64 {
