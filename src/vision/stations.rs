@@ -834,6 +834,55 @@ pub fn beam_edge_scale(
     best.map(|(_, first, last)| 0.5 * (first + last) as f64 / per_scale)
 }
 
+/// The smallest scale above `pose`'s at which the beam edge lies out of view, for a
+/// tip the fit placed from its two faces alone and refused for its beam edge: the
+/// faces fix the apex and the rotation, and when they run out of the frame nothing
+/// in view fixes the scale. A scale that puts the beam edge inside the frame where
+/// the frame does not show it is contradicted; one that puts it beyond the border,
+/// within its slack, is not. The caller verifies the tip again at that scale (where
+/// a face ending in view still pins the scale, [`face_ends`]); nothing is accepted
+/// here. `None` when the beam edge's line crosses the frame at every scale.
+pub fn beam_out_of_view_scale(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    blur_px: f64,
+) -> Option<f64> {
+    let size = [frame.width() as f64, frame.height() as f64];
+    let per_scale = t.edges[RED].offset.abs();
+    if per_scale < 1e-9 {
+        return None;
+    }
+    // The nearest the beam edge may lie to its predicted line is the slack's share
+    // closer to the apex: its whole stretch, so placed, must be out of view.
+    let nearer = 1.0 - RED_SLACK;
+    let (free_tau, bend_tau) = t.red_near_tip(0.0);
+    let out_of_view = |d: f64| {
+        let at = Pose {
+            scale: nearer * d / per_scale,
+            ..*pose
+        };
+        let beam_px = t.line(&at, RED).depth(t.segment(&at, BLUE).1).abs();
+        let pad = Sampling::new(blur_px, beam_px).reach() + 1.0;
+        // The stretch the beam edge's stations cover (as `station_span`), before trims.
+        let red = &t.edges[RED];
+        let (a, b) = (
+            t.place(&at, red.point(free_tau)),
+            t.place(&at, red.point(bend_tau)),
+        );
+        let len = norm(sub(b, a));
+        len < 1e-9
+            || clip_inside(a, scale(sub(b, a), 1.0 / len), size, pad)
+                .is_none_or(|(lo, hi)| hi < 0.0 || lo > len)
+    };
+    let from = (pose.scale * per_scale).ceil() as i64 + 1;
+    let to = (from as f64 + size[0].hypot(size[1]) / nearer).ceil() as i64;
+    (from..=to)
+        .map(|d| d as f64)
+        .find(|&d| out_of_view(d))
+        .map(|d| d / per_scale)
+}
+
 /// How far either way of the predicted face its step is looked for, pixels.
 const FACE_SEARCH_PX: i64 = 12;
 /// A station locates the face's step where its ratio reaches this, and shows a face
@@ -1162,6 +1211,38 @@ fn runs_out(
     (first..STATIONS).any(|k| !p.at_probe_level(k, level))
 }
 
+/// Whether each face shows its step to the end the pose gives it in view (its base,
+/// or the border it leaves the frame by): over the far [`RUN_SPAN`] of its stretch
+/// in view, the step does not end ([`located_end`], at [`LOCATED_RATIO`] of the step
+/// the face shows along its length) before the last [`RUN_SLACK`] of that stretch. A
+/// tip whose beam edge is placed out of view ([`beam_out_of_view_scale`], the
+/// smallest such scale) has only its faces to fix the scale: a face ending before
+/// that scale's end says the pyramid is smaller than any scale that hides the beam,
+/// whatever lies beyond the face (the beam of a probe of another geometry at the
+/// pyramid's level, a patch's border).
+pub fn faces_run_to_border(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    blur_px: f64,
+    calibrated: &[f64; 3],
+) -> bool {
+    let size = [frame.width() as f64, frame.height() as f64];
+    let beam_px = t.line(pose, RED).depth(t.segment(pose, BLUE).1).abs();
+    let s = Sampling::new(blur_px, beam_px);
+    [BLUE, GREEN].into_iter().all(|e| {
+        let tip = t.segment(pose, e).0;
+        let Some((a, b, _)) = station_span(t, pose, e, size, &s) else {
+            return true;
+        };
+        let line = t.line(pose, e);
+        let shown = profile(frame, &line, (a, b), None, &s, calibrated[e]).step_ratio();
+        let from = add(tip, scale(sub(b, tip), 1.0 - RUN_SPAN));
+        let far = profile(frame, &line, (from, b), None, &s, calibrated[e]);
+        located_end(&far, shown).is_none_or(|j| RUN_SPAN * (1.0 - j) <= RUN_SLACK)
+    })
+}
+
 /// Both faces, where the pose places them and their ends are measured (whether or not
 /// the fit kept them; `ends` as [`face_end`] gives them, back face first), ending more
 /// than [`END_SLACK`] of their length before or beyond the bases the scale predicts:
@@ -1466,6 +1547,38 @@ mod tests {
                 && (0.0..=len).contains(&along_beam);
             image::Luma([if pyramid || in_beam { 200 } else { 50 }])
         })
+    }
+
+    #[test]
+    fn a_beam_out_of_view_is_placed_beyond_the_border_and_the_faces_run_to_it() {
+        // The toy pyramid pointing down, its apex 60 px below the top border and its
+        // beam above it: the faces run out of the frame, nothing in view gives the
+        // scale. Placed at 0.8, the beam edge lies in view, where the frame does not
+        // show it.
+        let t = toy_under_beam();
+        let truth = Pose {
+            psi: 0.0,
+            scale: 2.5,
+            apex: [200.0, 60.0],
+        };
+        let placed = Pose {
+            scale: 0.8,
+            ..truth
+        };
+        let frame = probe_frame(&t, &truth, 0.0, true);
+        let scale = beam_out_of_view_scale(&frame, &t, &placed, 1.0).unwrap();
+        // The smallest such scale: the beam edge's stretch, its slack nearer the apex,
+        // just out of the stations' reach of the frame (6.5 px here; the red line 50
+        // reference px above the apex, a pixel of depth 0.02 of scale).
+        let nearest_y = |scale: f64| 60.0 - (1.0 - RED_SLACK) * 50.0 * scale;
+        assert!(scale > placed.scale && nearest_y(scale) < 6.5, "{scale}");
+        assert!(nearest_y(scale - 0.02) >= 6.5, "{scale}");
+        let out = Pose { scale, ..truth };
+        assert!(faces_run_to_border(&frame, &t, &out, 1.0, &[150.0; 3]));
+        // Faces ending 30 px below the border, 13 px short of the stretch the stations
+        // cover: the pyramid is smaller than any scale that hides the beam.
+        let short = probe_frame(&t, &truth, 30.0, true);
+        assert!(!faces_run_to_border(&short, &t, &out, 1.0, &[150.0; 3]));
     }
 
     #[test]

@@ -469,22 +469,38 @@ impl PyramidTracker {
         let fitted = fitted_edges(&bands, &fit);
         let refused_scale = first.miss == Some(Miss::EdgeMissing(Edge::Red.into()))
             || first.miss == Some(Miss::ScaleMismatch);
-        let rescale =
-            refused_scale && t.beam_px.is_some() && !fitted[RED] && fitted[BLUE] && fitted[GREEN];
-        if !rescale {
+        if !(refused_scale && !fitted[RED] && fitted[BLUE] && fitted[GREEN]) {
             return first;
         }
+        let k = self.factor as f64;
         let red_step = self.calibration.edge(Edge::Red).contrast;
-        let Some(scale) = stations::beam_edge_scale(frame, t, &pose, fit.blur, red_step) else {
+        let shown = t
+            .beam_px
+            .and_then(|_| stations::beam_edge_scale(frame, t, &pose, fit.blur, red_step));
+        if let Some(scale) = shown {
+            let moved = super::hypothesis::rescaled(hyp, scale / k);
+            if let Some((pose, fit, bands)) = self.refine(frame, t, &moved, true) {
+                let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
+                if second.detected && fitted_edges(&bands, &fit)[RED] {
+                    return second;
+                }
+            }
+            return first;
+        }
+        // The beam edge shown nowhere: out of view, if the faces leave room for it.
+        let Some(scale) = stations::beam_out_of_view_scale(frame, t, &pose, fit.blur) else {
             return first;
         };
-        let k = self.factor as f64;
         let moved = super::hypothesis::rescaled(hyp, scale / k);
-        let Some((pose, fit, bands)) = self.refine(frame, t, &moved, true) else {
+        let Some((pose, fit, bands)) = self.refine(frame, t, &moved, false) else {
             return first;
         };
         let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
-        if second.detected && fitted_edges(&bands, &fit)[RED] {
+        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        if second.detected
+            && !fitted_edges(&bands, &fit)[RED]
+            && stations::faces_run_to_border(frame, t, &pose, fit.blur, &calibrated)
+        {
             second
         } else {
             first
