@@ -461,6 +461,10 @@ impl PyramidTracker {
     /// taken only with the beam edge in its fit and the beam's thickness calibrated,
     /// so that the lower face and the free end check the scale found: without them,
     /// a probe of another geometry finds a scale where its own beam edge passes.
+    /// Where the frame shows the beam edge nowhere, the tip is placed at the smallest
+    /// scale that puts it out of view ([`stations::beam_out_of_view_scale`]) and kept
+    /// only with its faces running to the ends that scale gives them
+    /// ([`stations::faces_run_to_border`]).
     fn evaluate(&mut self, frame: &GrayImage, t: &Template, hyp: &Hypothesis) -> Estimate {
         let Some((pose, fit, bands)) = self.refine(frame, t, hyp, false) else {
             return Estimate::missed(Miss::LowConfidence, 0.0);
