@@ -252,11 +252,7 @@ fn station_span(
 ) -> Option<([f64; 2], [f64; 2], bool)> {
     let (tip, mut far) = t.segment(pose, e);
     if e == RED {
-        let red = &t.edges[RED];
-        let dir = (red.far_tau - red.tip_tau).signum();
-        let span = (t.bend_tau - red.tip_tau).abs();
-        let tau = red.tip_tau + dir * span.min(red.length());
-        far = t.place(pose, red.point(tau));
+        far = t.place(pose, t.edges[RED].point(t.red_near_tip(0.0).1));
     }
     let len = norm(sub(far, tip));
     if len < MIN_CHECKED_PX {
@@ -1192,23 +1188,42 @@ fn runs_out(
     step: f64,
     shown: f64,
 ) -> bool {
-    let (tip, base) = t.segment(pose, e);
-    if inside_frame(base, size, s.reach() + 1.0) || norm(sub(b, tip)) < 1e-9 {
+    if inside_frame(t.segment(pose, e).1, size, s.reach() + 1.0) {
         return false;
     }
-    let from = add(tip, scale(sub(b, tip), 1.0 - RUN_SPAN));
-    let p = profile(frame, &t.line(pose, e), (from, b), None, s, step);
-    let Some(j) = located_end(&p, shown) else {
+    let Some((p, j)) = step_ends_short(frame, t, pose, e, b, s, step, shown) else {
         return false;
     };
-    if RUN_SPAN * (1.0 - j) <= RUN_SLACK {
-        return false;
-    }
     // The body must end there too: beside a face near the border, a particle at the
     // probe's level takes the step away while the probe's side keeps its level.
     let level = p.held_level();
     let first = (j * STATIONS as f64).ceil() as usize;
     (first..STATIONS).any(|k| !p.at_probe_level(k, level))
+}
+
+/// Where face `e`'s step ends short of `b`, the far end of its stretch in view: over
+/// the far [`RUN_SPAN`] of that stretch, the profile and the share of it where the
+/// step stops ([`located_end`]), when that is before the last [`RUN_SLACK`] of the
+/// stretch.
+#[allow(clippy::too_many_arguments)]
+fn step_ends_short(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    b: [f64; 2],
+    s: &Sampling,
+    step: f64,
+    shown: f64,
+) -> Option<(Profile, f64)> {
+    let tip = t.segment(pose, e).0;
+    if norm(sub(b, tip)) < 1e-9 {
+        return None;
+    }
+    let from = add(tip, scale(sub(b, tip), 1.0 - RUN_SPAN));
+    let p = profile(frame, &t.line(pose, e), (from, b), None, s, step);
+    let j = located_end(&p, shown)?;
+    (RUN_SPAN * (1.0 - j) > RUN_SLACK).then_some((p, j))
 }
 
 /// Whether each face shows its step to the end the pose gives it in view (its base,
@@ -1231,15 +1246,11 @@ pub fn faces_run_to_border(
     let beam_px = t.line(pose, RED).depth(t.segment(pose, BLUE).1).abs();
     let s = Sampling::new(blur_px, beam_px);
     [BLUE, GREEN].into_iter().all(|e| {
-        let tip = t.segment(pose, e).0;
         let Some((a, b, _)) = station_span(t, pose, e, size, &s) else {
             return true;
         };
-        let line = t.line(pose, e);
-        let shown = profile(frame, &line, (a, b), None, &s, calibrated[e]).step_ratio();
-        let from = add(tip, scale(sub(b, tip), 1.0 - RUN_SPAN));
-        let far = profile(frame, &line, (from, b), None, &s, calibrated[e]);
-        located_end(&far, shown).is_none_or(|j| RUN_SPAN * (1.0 - j) <= RUN_SLACK)
+        let shown = profile(frame, &t.line(pose, e), (a, b), None, &s, calibrated[e]);
+        step_ends_short(frame, t, pose, e, b, &s, calibrated[e], shown.step_ratio()).is_none()
     })
 }
 

@@ -452,6 +452,11 @@ impl PyramidTracker {
         Some(best)
     }
 
+    /// Each edge's calibrated signed step, in edge order.
+    fn calibrated_steps(&self) -> [f64; 3] {
+        Edge::ALL.map(|e| self.calibration.edge(e).contrast)
+    }
+
     /// A hypothesis refined and verified.
     ///
     /// A tip placed from its two faces alone and refused for its beam edge or its
@@ -500,7 +505,7 @@ impl PyramidTracker {
             return first;
         };
         let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
-        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let calibrated = self.calibrated_steps();
         if second.detected
             && !fitted_edges(&bands, &fit)[RED]
             && stations::faces_run_to_border(frame, t, &pose, fit.blur, &calibrated)
@@ -605,7 +610,7 @@ impl PyramidTracker {
         if scale_measured && self.scale_range.is_some_and(|r| !r.contains(pose.scale)) {
             return Some(Miss::ScaleMismatch);
         }
-        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let calibrated = self.calibrated_steps();
         stations::check_edges(
             frame,
             t,
@@ -631,7 +636,7 @@ impl PyramidTracker {
             return Estimate::missed(miss, 0.0);
         }
         let in_view = bands.map(|b| b.is_some());
-        let calibrated = Edge::ALL.map(|e| self.calibration.edge(e).contrast);
+        let calibrated = self.calibrated_steps();
         let margin = half_width(fit.blur);
         let interior = verify::interior_median(frame, t, pose, margin).map_or(0.0, |m| {
             verify::interior_position(fit, m, self.calibration.pyramid_polarity())

@@ -6,11 +6,11 @@
 //! [`RUN`] bilinear reads one pixel apart along it, which cuts the noise by about
 //! `sqrt(RUN)` while a pose within a degree moves the run's ends by a few hundredths
 //! of a pixel (four samples are read at a time with AVX2 gathers where the CPU has
-//! them, to the bit as one at a time). The step is found at the largest signed derivative over one pixel
-//! either side; its size is the mean level on the probe's side minus the mean outside,
-//! both read clear of the blur, and it is placed by its area between them (unbiased
-//! for any symmetric blur, where a derivative peak of interpolated samples leans
-//! toward the pixel centres by up to 0.15 px).
+//! them, to the bit as one at a time). The step is found at the largest signed
+//! derivative over one pixel either side; its size is the mean level on the probe's
+//! side minus the mean outside, both read clear of the blur, and it is placed by its
+//! area between them (unbiased for any symmetric blur, where a derivative peak of
+//! interpolated samples leans toward the pixel centres by up to 0.15 px).
 
 use image::GrayImage;
 
