@@ -28,7 +28,7 @@ use tracing_subscriber::{EnvFilter, Layer};
 
 /// The window over which one place in the code may write [`LINES_PER_INTERVAL`] lines.
 const REPEAT_INTERVAL: Duration = Duration::from_secs(1);
-/// Lines one place in the code may write per [`REPEAT_INTERVAL`].
+/// Lines one place in the code may write per `REPEAT_INTERVAL`.
 pub const LINES_PER_INTERVAL: u32 = 10;
 
 /// Where the lines go and how they look.

@@ -1,5 +1,9 @@
 //! The command-line front end: one clap subcommand per job, each a thin layer over the
-//! library. `src/main.rs` parses [`Cli`] and calls [`run`].
+//! library. `src/main.rs` parses [`Cli`] and calls [`run()`].
+//!
+//! Its doc comments are the command-line help (clap): `[section]` there names a TOML
+//! section of the configuration, and `<name>` a placeholder, not an item or a tag.
+#![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};

@@ -1,6 +1,6 @@
 //! Configuration in two steps: serde structs that mirror the TOML file exactly
 //! (`deny_unknown_fields`, so a misspelt key is an error, not a silent default), then
-//! [`Config::validate`]-style checks that turn them into a [`Config`] whose fields can
+//! `validate`-style checks that turn them into a [`Config`] whose fields can
 //! be trusted (finite, positive, consistent).
 //!
 //! Every error names the file, the key and the offending value, e.g.

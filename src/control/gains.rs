@@ -150,7 +150,7 @@ pub struct SafetyLimits {
     pub max_frame_period_ms: f64,
 }
 
-/// How the plausibility gate judges an estimate (see [`super::gate`]).
+/// How the plausibility gate judges an estimate (see `super::gate`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GateLimits {
     /// Allowed change: k x commanded stage travel + this many force sigmas.

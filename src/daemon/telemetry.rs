@@ -182,7 +182,7 @@ impl Files {
 
 /// Starts the `telemetry` thread; it drains until `stop` is set, then flushes and ends.
 /// Events reach `events.log` as they happen; the CSV files are flushed every
-/// [`FLUSH_EVERY`]. A write that fails (a full disk) stops the recording, reported
+/// `FLUSH_EVERY`. A write that fails (a full disk) stops the recording, reported
 /// through `recorder.status`; the thread keeps draining the rings so the loops never
 /// notice.
 pub fn spawn_recorder(

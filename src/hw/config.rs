@@ -2,7 +2,7 @@
 //! settings. The default for every kind is `"sim"`, the simulated lab, so a
 //! configuration that names no hardware never touches any.
 //!
-//! Each section is read as a TOML table here and then ([`tagged`]) into its raw enum,
+//! Each section is read as a TOML table here and then (`tagged`) into its raw enum,
 //! tagged by `backend`: each variant holds the backend's own struct of keys
 //! (`deny_unknown_fields`), so the backend chosen decides which keys exist, and a key
 //! of another backend is an error that lists the chosen one's. `[daq.<axis>]` tables

@@ -56,7 +56,7 @@ pub struct ModelTable {
 }
 
 impl ModelTable {
-    /// Samples the exact model (676 closed-form evaluations; see [`phi0_for_node`]).
+    /// Samples the exact model (676 closed-form evaluations; see `phi0_for_node`).
     pub fn build() -> ModelTable {
         let forward = Octaves::build(FRAC_PI_2 - MAX_PHI0_RAD, FRAC_PI_2, |distance| {
             forward_ratios(FRAC_PI_2 - distance)

@@ -60,7 +60,7 @@ const MAX_REDRAWS: usize = 64;
 const WHOLE_TIP_MARGIN_PX: f64 = 8.0;
 
 /// Whether the frame of `spec` shows the probe's whole tip: the apex, the pyramid's
-/// base on both faces and the beam's free end, each [`WHOLE_TIP_MARGIN_PX`] inside.
+/// base on both faces and the beam's free end, each `WHOLE_TIP_MARGIN_PX` inside.
 /// `outline` is scratch space.
 pub fn shows_whole_tip(spec: &FrameSpec, outline: &mut Vec<[f64; 2]>) -> bool {
     let e = probe_outline(&spec.probe, &spec.pose(), spec.width, spec.height, outline);

@@ -316,7 +316,7 @@ fn framed_tool(kind: ToolKind, seed: u64) -> ToolGeometry {
 impl Session {
     /// `n` of [`Session::several`]'s two-probe 640x480 frames whose first probe is a
     /// rigid tool of `kind` (its flanks running out of the frame), out of view in
-    /// [`TOOL_OUT_OF_VIEW`] of the frames, beside the second, an AFM cantilever.
+    /// `TOOL_OUT_OF_VIEW` of the frames, beside the second, an AFM cantilever.
     pub fn tool_beside_a_cantilever(kind: ToolKind, seed: u64, n: usize) -> Session {
         let mut session = Session::several(seed, 2, n, 640, 480);
         let tool = framed_tool(kind, sub_seed(seed, 60));
@@ -331,7 +331,7 @@ impl Session {
 
     /// `n` of [`Session::several`]'s two-probe 640x480 frames whose probes are rigid
     /// tools of `kinds` (kept clear of each other by their own outlines), each out of
-    /// view in [`TOOL_OUT_OF_VIEW`] of the frames.
+    /// view in `TOOL_OUT_OF_VIEW` of the frames.
     pub fn two_tools(kinds: [ToolKind; 2], seed: u64, n: usize) -> Session {
         let tools: Vec<Option<ToolGeometry>> = (0..2)
             .map(|k| Some(framed_tool(kinds[k], sub_seed(seed, 60 + k as u64))))

@@ -26,10 +26,11 @@ pub struct ToolTruth {
     pub in_view: bool,
     /// Rotation from the reference pose, degrees CCW on screen (NaN when blank).
     pub angle_deg: f64,
-    /// The tip point: where the two [`ToolKind::apex_edges`] meet (NaN when blank).
+    /// The tip point: where the two edges of [`super::ToolKind::apex_edges`] meet (NaN
+    /// when blank).
     pub apex_px: [f64; 2],
     pub px_per_um: f64,
-    /// The true edges in [`ToolKind::edge_names`] order (none when blank): each flank
+    /// The true edges in [`super::ToolKind::edge_names`] order (none when blank): each flank
     /// its chord from the end face's corner back over its span, the end face from the
     /// apex to the other corner.
     pub edges: Vec<(&'static str, Segment)>,

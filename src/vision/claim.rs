@@ -55,7 +55,7 @@ impl Claim {
     }
 
     /// Whether point `p` lies on this body (within its margin of its hull, or
-    /// [`CLAIM_RADIUS_PX`] of its apex).
+    /// `CLAIM_RADIUS_PX` of its apex).
     pub fn contains(&self, p: [f64; 2]) -> bool {
         if norm(sub(p, self.apex)) <= CLAIM_RADIUS_PX {
             return true;

@@ -170,7 +170,7 @@ impl ProbeSet {
 }
 
 /// Refuses, as [`Miss::ScaleUnlikeOthers`], each detection whose scale strays from the
-/// median of the other detections of its group by more than [`SCALE_RATIO`] (with two
+/// median of the other detections of its group by more than `SCALE_RATIO` (with two
 /// in a group that disagree, both: the frame cannot say which is wrong).
 pub fn refuse_scale_outliers(estimates: &mut [Estimate], groups: &[usize]) {
     let mut refused = [false; MAX_PROBES];

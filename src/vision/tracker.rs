@@ -688,7 +688,7 @@ impl PyramidTracker {
 }
 
 /// Tracks one calibrated probe frame after frame: the AFM pyramid (red, blue, green)
-/// or a rigid probe of named edges ([`super::rigid`]). Either gives the one
+/// or a rigid probe of named edges (`super::rigid`). Either gives the one
 /// [`Estimate`]; a probe with a cantilever gives its force.
 #[derive(Debug)]
 pub struct Tracker {

@@ -2,7 +2,7 @@
 //! comedi crate, and bindgen would need libclang). Linked against `libcomedi.so.0`
 //! (apt: libcomedi-dev to build, libcomedi0 to run).
 //!
-//! [`Device`] is the safe wrapper: every call goes through [`Device::check`], the one
+//! [`Device`] is the safe wrapper: every call goes through `Device::check`, the one
 //! place a C status becomes a [`ComediError`] (with `comedi_errno`/`comedi_strerror`),
 //! and dropping it closes the device. Setting outputs to zero on drop is the job of
 //! the rate output that owns the device ([`super::comedi::ComediRate`]), which knows

@@ -4,7 +4,7 @@
 //! of hidapi 0.14 (`hid_send_output_report`, `hid_get_report_descriptor`) that Debian
 //! 12's hidapi 0.13.1 does not have.
 //!
-//! [`Device`] owns an open `hid_device *` and closes it on drop; [`Device::check`] is the
+//! [`Device`] owns an open `hid_device *` and closes it on drop; `Device::check` is the
 //! one place a hidapi status becomes an error (with `hid_error`'s message).
 use std::ffi::{c_char, c_int, c_uchar, c_ushort, CStr};
 use std::ptr::NonNull;

@@ -109,10 +109,10 @@ pub fn auto_calibrate(
 }
 
 /// The candidate tip points of a probe entering the frame from a side: for each
-/// polarity (the brighter body first), each level of [`body_levels`] (Otsu's over all
+/// polarity (the brighter body first), each level of `body_levels` (Otsu's over all
 /// grey levels first: the bright class's shrinks a faint body's corners by pixels) and
-/// each of the [`BODIES`] largest bodies touching a side, a corner of its end (the
-/// [`END_PX`] rule) along its long axis, where that is clear of the border.
+/// each of the `BODIES` largest bodies touching a side, a corner of its end (the
+/// `END_PX` rule) along its long axis, where that is clear of the border.
 pub fn find_tip_points(reference: &GrayImage) -> Result<Vec<[f64; 2]>, AutoCalError> {
     let mut dark = reference.clone();
     image::imageops::invert(&mut dark);
