@@ -21,7 +21,8 @@ use super::geometry::{
 use super::options::{CalibrationConfig, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner, Turns};
-use super::template::{Pose, Template, TemplateEdge, BLUE, GREEN, RED};
+use super::stations;
+use super::template::{Template, TemplateEdge, BLUE, GREEN, RED};
 use super::{Edge, VisionError};
 
 /// Largest distance (detection pixels) of the edge pixels used from the clicked line.
@@ -159,11 +160,7 @@ impl Calibration {
         let template = build_template(&first.lines, &coarse)?;
         // Second pass on exactly the stretches the tracker fits (the template at rest),
         // so that the reference itself reads zero.
-        let at_rest = Pose {
-            psi: 0.0,
-            scale: 1.0,
-            apex: template.apex,
-        };
+        let at_rest = template.at_rest();
         let size = [w as f64, h as f64];
         let straight = BendPrior {
             mean: 0.0,
@@ -192,6 +189,9 @@ impl Calibration {
             }
         }
         let mut template = build_template(&lines, &coarse)?;
+        for e in [BLUE, GREEN] {
+            extend_face(reference, &mut template, e, contrast[e], blur);
+        }
         template.beam_px = beam_thickness(reference, &template, contrast[RED], blur);
         let grey_mask = masked
             && (0..3).all(|e| {
@@ -278,6 +278,28 @@ const BEAM_AGREE_SHARE: f64 = 0.6;
 /// Fewest profiles in view for a measurement: a quarter of them.
 const BEAM_MIN_PROFILES: usize = BEAM_PROFILES / 4;
 const BEAM_AGREE_PX: f64 = 1.5;
+
+/// A face whose step runs on past its followed base by this share of its length or
+/// more has its base moved to where it ends ([`stations::face_runs_past_base`]):
+/// verification's slack for where a face ends (`stations::END_SLACK`).
+const BASE_MOVE: f64 = 0.1;
+
+/// Moves face `e`'s base to where the reference's grey levels show its step ending,
+/// when that lies well beyond the extent followed on the edge map, which loses a
+/// face where a line of the background crosses it. The base stays on the probe's
+/// side of the beam edge.
+fn extend_face(reference: &GrayImage, template: &mut Template, e: usize, step: f64, blur: f64) {
+    let share = stations::face_runs_past_base(reference, template, e, blur, step);
+    if share < 1.0 + BASE_MOVE {
+        return;
+    }
+    let mut moved = template.edges[e];
+    moved.far_tau *= share;
+    let base = add(template.apex, moved.point(moved.far_tau));
+    if template.line(&template.at_rest(), RED).depth(base) > 0.0 {
+        template.edges[e] = moved;
+    }
+}
 
 /// The depth of the beam's lower face below the red line, reference pixels: behind
 /// the pyramid, on profiles across the beam from the back face's base towards the

@@ -1118,6 +1118,65 @@ fn face_end(
     Some(1.0 - END_SPAN + 2.0 * END_SPAN * j)
 }
 
+/// How far past its base, as a share of its length, a face's step is followed on the
+/// reference ([`face_runs_past_base`]).
+const FOLLOW_SPAN: f64 = 0.3;
+/// Positions along a face's line (1 px apart) without its step that end the follow:
+/// a line of the background crossing the face near its base is narrower.
+const FOLLOW_GAP_PX: usize = 8;
+
+/// How far face `e` of template `t`, at rest on its reference `frame` (blur
+/// `blur_px`, the face's calibrated step `step`), runs on in the grey levels beyond
+/// its base, as a share of its length (1 at the base). From the base on, 1 px at a
+/// time, stations over 7 px of the face's line show the face while they step by
+/// [`END_SHOWN_MIN`] of the step on average, the probe's level on the probe's side
+/// (within [`INSIDE_SPREAD`] of the step of the face's level from 0.3 to 0.9 of its
+/// length); [`FOLLOW_GAP_PX`] positions without the face end the follow. Past the
+/// face's true base the beam lies on both sides within a few pixels; a line of the
+/// background crossing the face takes part of its step, not all of it.
+pub fn face_runs_past_base(
+    frame: &GrayImage,
+    t: &Template,
+    e: usize,
+    blur_px: f64,
+    step: f64,
+) -> f64 {
+    let pose = t.at_rest();
+    let (tip, base) = t.segment(&pose, e);
+    let len = norm(sub(base, tip));
+    if len < MIN_CHECKED_PX {
+        return 1.0;
+    }
+    let dir = scale(sub(base, tip), 1.0 / len);
+    let line = t.line(&pose, e);
+    let beam_px = t.line(&pose, RED).depth(t.segment(&pose, BLUE).1).abs();
+    let s = Sampling::new(blur_px, beam_px);
+    let at = |d: f64| add(tip, scale(dir, d));
+    let body = profile(frame, &line, (at(0.3 * len), at(0.9 * len)), None, &s, step);
+    if body.stations < STATIONS || body.step_ratio() < HOLD_RATIO {
+        return 1.0;
+    }
+    let level = body.held_level();
+    let mean = |v: &[f64; STATIONS]| v.iter().sum::<f64>() / STATIONS as f64;
+    let (mut last, mut gap) = (len, 0);
+    let mut d = len + 1.0;
+    while d <= (1.0 + FOLLOW_SPAN) * len && gap <= FOLLOW_GAP_PX {
+        let p = profile(frame, &line, (at(d - 3.0), at(d + 4.0)), None, &s, step);
+        if p.stations < STATIONS {
+            break;
+        }
+        if mean(&p.ratio) >= END_SHOWN_MIN
+            && (mean(&p.inside) - level).abs() <= INSIDE_SPREAD * step.abs()
+        {
+            (last, gap) = (d, 0);
+        } else {
+            gap += 1;
+        }
+        d += 1.0;
+    }
+    last / len
+}
+
 /// Where a step along `line` from `span.0` to `span.1` stops showing, as a share of
 /// that span: the split of its stations that best explains them, showing the step
 /// before (at [`LOCATED_RATIO`] of `shown`, taken between [`END_SHOWN_MIN`] and 1, of

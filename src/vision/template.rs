@@ -80,6 +80,15 @@ pub struct Pose {
 }
 
 impl Template {
+    /// The pose that lays the template on its own reference image.
+    pub fn at_rest(&self) -> Pose {
+        Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: self.apex,
+        }
+    }
+
     /// Frame position of template point `q` (relative to the apex, reference pixels).
     pub fn place(&self, pose: &Pose, q: [f64; 2]) -> [f64; 2] {
         add(pose.apex, scale(rotate(q, pose.psi), pose.scale))
@@ -174,11 +183,7 @@ mod tests {
     #[test]
     fn identity_pose_reproduces_the_reference() {
         let t = toy();
-        let pose = Pose {
-            psi: 0.0,
-            scale: 1.0,
-            apex: t.apex,
-        };
+        let pose = t.at_rest();
         let red = t.line(&pose, RED);
         assert!((red.depth([0.0, 50.0])).abs() < 1e-12);
         assert!(red.depth(t.apex) > 0.0, "apex is on the probe side of red");
@@ -209,11 +214,7 @@ mod tests {
     #[test]
     fn true_apex_lies_the_bias_inside_both_imaged_faces() {
         let t = toy();
-        let upright = Pose {
-            psi: 0.0,
-            scale: 1.0,
-            apex: t.apex,
-        };
+        let upright = t.at_rest();
         // Faces at +-30 deg from the axis: 0.3 px across each is 0.6 px along the axis,
         // up into the pyramid.
         let a = t.true_apex(&upright, 0.3);
