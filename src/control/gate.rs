@@ -18,7 +18,7 @@
 //!   one at `full_sigma_deg`.
 //!
 //! Pure and allocation-free; the haptic loop runs it on each new estimate, with the
-//! stage travel it integrated from its own velocity commands ([`TravelLog`]).
+//! stage travel it integrated from its own velocity commands ([`TravelLog`](super::timing::TravelLog)).
 
 use super::gains::GateLimits;
 use crate::model::Cantilever;

@@ -170,7 +170,7 @@ impl<const F: usize> Octaves<F> {
     }
 }
 
-/// cosines[i][k] = cos(k theta_i) = T_k(t_i) at the nodes t_i = cos(theta_i),
+/// `cosines[i][k]` = cos(k theta_i) = T_k(t_i) at the nodes t_i = cos(theta_i),
 /// theta_i = pi (i + 1/2) / NODES.
 fn chebyshev_at_nodes() -> [[f64; NODES]; NODES] {
     std::array::from_fn(|i| {
@@ -200,7 +200,7 @@ fn chebyshev_coefficients<const F: usize>(
     })
 }
 
-/// monomials[k][j] = coefficient of t^j in T_k(t) (exact small integers), from
+/// `monomials[k][j]` = coefficient of t^j in T_k(t) (exact small integers), from
 /// T_{k+1} = 2 t T_k - T_{k-1}.
 fn chebyshev_monomials() -> [[f64; NODES]; NODES] {
     let mut t = [[0.0; NODES]; NODES];

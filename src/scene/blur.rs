@@ -84,7 +84,7 @@ impl Blur {
 /// Block width of the convolution: the accumulators stay in registers.
 const BLOCK: usize = 16;
 
-/// out[x] = sum_k kernel[k] * tap(k, x)[0] for every x, where `tap(k, x)` is the input
+/// `out[x] = sum_k kernel[k] * tap(k, x)[0]` for every x, where `tap(k, x)` is the input
 /// slice seen by tap k at output x. Accumulates a block of outputs over all taps at a
 /// time so the sums stay in registers and the inner loop vectorises.
 fn convolve_blocks<'a>(out: &mut [f32], kernel: &[f32], tap: impl Fn(usize, usize) -> &'a [f32]) {

@@ -17,7 +17,7 @@
 //!
 //! A spec's own probe may instead be a rigid tool without a cantilever (a needle, the
 //! end of a tipless cantilever, a gripper jaw: [`ToolGeometry`], named straight edges,
-//! truth from [`tool_truth`]); [`tool_suite`] generates seeded sessions of them.
+//! truth from [`tool_truth`]); [`tool_suite()`] generates seeded sessions of them.
 //!
 //! Shapes are drawn with exact area coverage (anti-aliased at sub-pixel level) and then
 //! blurred, so the truth is exact to the rasteriser's float precision. The physics of

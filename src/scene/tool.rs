@@ -9,7 +9,7 @@
 //! The tool's axis points from its base (beyond the entry side) to its end; "up" is the
 //! side of the beam's upper face in [`super::ProbeGeometry`]'s frames (screen up for a
 //! level tool from either side). The up-side flank is edge 0 of
-//! [`ToolKind::edge_names`], the down-side flank edge 1, the end face edge 2.
+//! [`super::ToolKind::edge_names`], the down-side flank edge 1, the end face edge 2.
 //!
 //! A flank may bow (a needle's does): it is drawn as a gentle parabolic arc over its
 //! `span_um` from the end face's corner and runs straight on beyond it along the arc's

@@ -4,7 +4,7 @@
 //! Internally every angle is an *image* angle: `atan2(dy, dx)` in pixel coordinates
 //! (x right, y down), so a positive image rotation turns clockwise on screen. Outputs
 //! follow docs/conventions.md (degrees, counter-clockwise on screen), converted only by
-//! [`screen_deg_from_image_rad`] and [`image_rad_from_screen_deg`].
+//! [`screen_deg_from_image_rad`] and, in the tests, `image_rad_from_screen_deg`.
 
 /// Screen angle (degrees, CCW on screen) of an image-angle rotation (radians, y down).
 pub fn screen_deg_from_image_rad(angle_rad: f64) -> f64 {

@@ -320,7 +320,7 @@ impl Head {
 
 const BAD_REQUEST: Head = Head::new("400 Bad Request", "text/plain");
 
-/// `Host:` names this machine: localhost, 127.x.x.x or [::1] (any port).
+/// `Host:` names this machine: localhost, 127.x.x.x or `[::1]` (any port).
 fn is_loopback_host(host: &str) -> bool {
     let name = match host.strip_prefix('[') {
         Some(rest) => rest.split(']').next().unwrap_or(""),

@@ -1,6 +1,6 @@
 //! Automatic calibration of a rigid probe: its straight edges found from one click on
 //! or near its tip point, as clicked pixels on each that then go through the ordinary
-//! calibration ([`calibrate`]). The result is a template like any other: the same
+//! calibration ([`calibrate()`]). The result is a template like any other: the same
 //! block printed, the same overlay for a person to confirm.
 //!
 //! 1. On a ring around the click the probe is the arc that stands out (as for the AFM
