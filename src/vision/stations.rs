@@ -85,6 +85,13 @@ impl Sampling {
         }
     }
 
+    /// For a frame of blur `blur_px` showing template `t` at `pose`: the beam taken as
+    /// thick as the back face's base lies below the beam edge.
+    fn at_pose(t: &Template, pose: &Pose, blur_px: f64) -> Sampling {
+        let beam_px = t.line(pose, RED).depth(t.segment(pose, BLUE).1).abs();
+        Sampling::new(blur_px, beam_px)
+    }
+
     fn reach(&self) -> f64 {
         self.margin_px + self.inside_px.max(self.outside_px)
     }
@@ -441,9 +448,7 @@ pub fn check_edges(
 ) -> Option<Miss> {
     let size = [frame.width() as f64, frame.height() as f64];
     let red = t.line(pose, RED);
-    let back_base = t.segment(pose, BLUE).1;
-    let beam_px = red.depth(back_base).abs();
-    let s = Sampling::new(blur_px, beam_px);
+    let s = Sampling::at_pose(t, pose, blur_px);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     // Faces whose corner (the apex) is in view, and of those the ones not shown there.
     let (mut corners, mut hidden) = (0, 0);
@@ -793,8 +798,8 @@ pub fn beam_edge_scale(
             scale: d as f64 / per_scale,
             ..*pose
         };
+        let s = Sampling::at_pose(t, &at, blur_px);
         let red = t.line(&at, RED);
-        let s = Sampling::new(blur_px, red.depth(t.segment(&at, BLUE).1).abs());
         let Some((a, b, true)) = station_span(t, &at, RED, size, &s) else {
             return None;
         };
@@ -858,8 +863,7 @@ pub fn beam_out_of_view_scale(
             scale: nearer * d / per_scale,
             ..*pose
         };
-        let beam_px = t.line(&at, RED).depth(t.segment(&at, BLUE).1).abs();
-        let pad = Sampling::new(blur_px, beam_px).reach() + 1.0;
+        let pad = Sampling::at_pose(t, &at, blur_px).reach() + 1.0;
         // The stretch the beam edge's stations cover (as `station_span`), before trims.
         let red = &t.edges[RED];
         let (a, b) = (
@@ -1149,8 +1153,7 @@ pub fn face_runs_past_base(
     }
     let dir = scale(sub(base, tip), 1.0 / len);
     let line = t.line(&pose, e);
-    let beam_px = t.line(&pose, RED).depth(t.segment(&pose, BLUE).1).abs();
-    let s = Sampling::new(blur_px, beam_px);
+    let s = Sampling::at_pose(t, &pose, blur_px);
     let at = |d: f64| add(tip, scale(dir, d));
     let body = profile(frame, &line, (at(0.3 * len), at(0.9 * len)), None, &s, step);
     if body.stations < STATIONS || body.step_ratio() < HOLD_RATIO {
@@ -1302,8 +1305,7 @@ pub fn faces_run_to_border(
     calibrated: &[f64; 3],
 ) -> bool {
     let size = [frame.width() as f64, frame.height() as f64];
-    let beam_px = t.line(pose, RED).depth(t.segment(pose, BLUE).1).abs();
-    let s = Sampling::new(blur_px, beam_px);
+    let s = Sampling::at_pose(t, pose, blur_px);
     [BLUE, GREEN].into_iter().all(|e| {
         let Some((a, b, _)) = station_span(t, pose, e, size, &s) else {
             return true;
