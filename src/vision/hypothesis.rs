@@ -222,7 +222,15 @@ impl Search {
                 partial(&pose).map(|(cov, s)| (pose, cov, s, None))
             })
         } else {
-            scan_scale(&rows[..2], psi, partial)
+            // Only the plausible scales at which both members can find support.
+            let within = |a0, a1| {
+                let range = plausible_scales(t, size, a0, a1);
+                reach.iter().flatten().fold(range, |[lo, hi], r| {
+                    let [l, h] = r.scales(a0, a1);
+                    [lo.max(l), hi.min(h)]
+                })
+            };
+            scan_scale(&rows[..2], psi, within, partial)
         };
         if let Some((pose, coverage, score, plateau)) = best {
             if ruled_out(pose.apex) {
@@ -328,10 +336,12 @@ fn scale_grid() -> &'static [f64; SCALE_STEPS_MAX] {
 }
 
 /// Two lines leave the scale free: the apex moves along `a0 + scale * a1`. Scans the
-/// scale on a log grid and keeps the best-scoring placement.
+/// scale on a log grid, over the range `within(a0, a1)` outside which `score` fails,
+/// and keeps the best-scoring placement.
 fn scan_scale(
     r: &[LineRow],
     psi: f64,
+    within: impl Fn([f64; 2], [f64; 2]) -> [f64; 2],
     score: impl Fn(&Pose) -> Option<([Coverage; 3], f64)>,
 ) -> Option<(Pose, [Coverage; 3], f64, Option<Plateau>)> {
     let det = r[0].normal[0] * r[1].normal[1] - r[0].normal[1] * r[1].normal[0];
@@ -346,13 +356,19 @@ fn scan_scale(
     };
     let a0 = solve(r[0].rho, r[1].rho);
     let a1 = solve(-r[0].offset, -r[1].offset);
+    let [lo, hi] = within(a0, a1);
+    // Widened by a rounding's worth (the grid's steps are 3 %).
+    let (lo, hi) = (lo * (1.0 - 1e-9), hi * (1.0 + 1e-9));
+    let grid = scale_grid();
+    let (first, last) = (
+        grid.partition_point(|&s| s < lo),
+        grid.partition_point(|&s| s <= hi.min(SCALE_MAX)),
+    );
     let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
     let mut scores = [f64::NEG_INFINITY; SCALE_STEPS_MAX];
     let mut best_k = 0;
-    for (k, (slot, &scale)) in scores.iter_mut().zip(scale_grid()).enumerate() {
-        if scale > SCALE_MAX {
-            break;
-        }
+    for k in first..last {
+        let (slot, scale) = (&mut scores[k], grid[k]);
         let apex = [a0[0] + scale * a1[0], a0[1] + scale * a1[1]];
         let pose = Pose { psi, scale, apex };
         if let Some((cov, s)) = score(&pose) {
@@ -453,6 +469,18 @@ fn plausible(t: &Template, pose: &Pose, size: [f64; 2]) -> bool {
     x > -size[0] && x < 2.0 * size[0] && y > -size[1] && y < 2.0 * size[1]
 }
 
+/// The scales at which a pose whose apex is `a0 + scale * a1` can be [`plausible`] (a
+/// superset: the apex's bounds are open there).
+fn plausible_scales(t: &Template, size: [f64; 2], a0: [f64; 2], a1: [f64; 2]) -> [f64; 2] {
+    let mut range = [SCALE_MIN.max(MIN_HEIGHT_PX / t.height), SCALE_MAX];
+    for i in 0..2 {
+        // -size < a0 + scale * a1 < 2 size
+        at_most(&mut range, a1[i], 2.0 * size[i] - a0[i]);
+        at_most(&mut range, -a1[i], a0[i] + size[i]);
+    }
+    range
+}
+
 /// Margin trimmed off each end of a predicted segment (corners are rounded by blur).
 fn end_margin(length: f64) -> f64 {
     1.5 + 0.05 * length
@@ -520,6 +548,23 @@ impl Reach {
         })
     }
 
+    /// The scales at which a pose whose apex is `a0 + scale * a1` can give this
+    /// member support in [`member_cover`] (a superset: the untrimmed segment within
+    /// [`REACH_SLACK_BINS`] bins of the supported bins). Both ends of the segment move
+    /// linearly with the scale, so the range is an interval.
+    fn scales(&self, a0: [f64; 2], a1: [f64; 2]) -> [f64; 2] {
+        let at0 = dot(self.dir, a0) + self.base;
+        let rate = dot(self.dir, a1);
+        let (u, v) = (rate + self.t_tip, rate + self.t_far);
+        let slack = REACH_SLACK_BINS * self.bin;
+        let mut range = [0.0, f64::INFINITY];
+        // The near end at or before the last supported bin...
+        at_most(&mut range, u.min(v), self.supported[1] + slack - at0);
+        // ...and the far end at or past the first.
+        at_most(&mut range, -u.max(v), at0 - (self.supported[0] - slack));
+        range
+    }
+
     /// False only if [`member_cover`] would find too little. `support` sums the bins
     /// `a..b` nearest the trimmed segment's ends: with `o(R)` the overlap of the
     /// segment with range R, its visible length is at least `o(profile) - bin` and at
@@ -538,6 +583,21 @@ impl Reach {
         const SLACK: f64 = 1e-6;
         visible + self.bin + SLACK >= MIN_MEMBER_PX
             && supported + SLACK >= MIN_MEMBER_FRACTION * (visible - self.bin)
+    }
+}
+
+/// Slack of [`Reach::scales`] around the supported bins, in bins (their rounding in
+/// [`Candidates::support`] is half a bin).
+const REACH_SLACK_BINS: f64 = 3.0;
+
+/// Narrows `range` (of scales s >= 0) to where `s * rate <= rhs`.
+fn at_most(range: &mut [f64; 2], rate: f64, rhs: f64) {
+    if rate > 0.0 {
+        range[1] = range[1].min(rhs / rate);
+    } else if rate < 0.0 {
+        range[0] = range[0].max(rhs / rate);
+    } else if rhs < 0.0 {
+        *range = [f64::INFINITY, 0.0];
     }
 }
 
@@ -660,6 +720,47 @@ mod tests {
         assert!(
             rejected > 2_000 && accepted > 2_000,
             "{rejected} {accepted}"
+        );
+    }
+
+    #[test]
+    fn scale_range_holds_every_scale_member_cover_accepts() {
+        let cands = gapped_candidate();
+        let c = cands.list[0];
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = |lo: f64, hi: f64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        let (mut outside, mut accepted) = (0, 0);
+        for _ in 0..2_000 {
+            // A pair's line of apexes `a0 + scale * a1` and a segment near the line.
+            let tip = [uniform(-30.0, 30.0), uniform(-2.0, 2.0)];
+            let far = [tip[0] + uniform(-60.0, 60.0), tip[1] + uniform(-4.0, 4.0)];
+            let a0 = [uniform(0.0, 300.0), uniform(70.0, 95.0)];
+            let a1 = [uniform(-80.0, 80.0), uniform(-5.0, 5.0)];
+            let reach = Reach::new(&cands, &c, (tip, far)).unwrap();
+            let [lo, hi] = reach.scales(a0, a1);
+            for &scale in scale_grid() {
+                let apex = [a0[0] + scale * a1[0], a0[1] + scale * a1[1]];
+                let pose = Pose {
+                    psi: 0.0,
+                    scale,
+                    apex,
+                };
+                let inside = (lo..=hi).contains(&scale);
+                let cover = member_cover(&pose, (tip, far), &cands, &c);
+                assert!(inside || cover.is_none(), "{scale} {lo} {hi} {cover:?}");
+                outside += !inside as usize;
+                accepted += cover.is_some() as usize;
+            }
+        }
+        // Both the range's inside and outside occur, and placements are accepted.
+        assert!(
+            outside > 100_000 && accepted > 1_000,
+            "{outside} {accepted}"
         );
     }
 }
