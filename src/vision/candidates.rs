@@ -17,6 +17,9 @@ const DUPLICATE_PX: f64 = 1.0;
 /// A raw peak this close to a listed candidate is not polished again.
 const COVERED_ANGLE_RAD: f64 = 0.026;
 const COVERED_PX: f64 = 1.5;
+/// Line candidates kept per edge: the distinct lines of its strongest Hough peaks.
+pub const CANDIDATES_PER_EDGE: usize = 12;
+
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
 pub const PROFILE_BINS: usize = 1024;
 
@@ -68,6 +71,9 @@ impl Candidates {
         self.prefix.resize(most * (PROFILE_BINS + 1), 0);
         self.marks.resize(PROFILE_BINS, 0);
         for (slot, peak) in peaks.iter().enumerate() {
+            if self.list.iter().filter(|o| o.edge == peak.edge).count() >= CANDIDATES_PER_EDGE {
+                continue;
+            }
             let nu = normal_angles[peak.edge] + peak.psi;
             let mut normal = [nu.cos(), nu.sin()];
             let mut rho = peak.rho;

@@ -20,8 +20,12 @@ use super::simd::dispatch;
 
 /// Width of a psi bin, radians.
 pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
-/// Line candidates kept per edge.
-pub const PEAKS_PER_EDGE: usize = 12;
+/// Peaks kept per edge. A long straight line peaks again at neighbouring rotations
+/// (their lines cross it and collect its pixels near the crossing); polished, those
+/// peaks find the line again and are dropped. Keeping more peaks than candidates
+/// (`candidates::CANDIDATES_PER_EDGE`) lets a shorter line beside long ones (a face
+/// beside the stripes of a patterned sample) still reach the search.
+pub const PEAKS_PER_EDGE: usize = 20;
 /// Fewest (smoothed, so twice the pixel count) votes for a peak.
 const MIN_VOTES: u16 = 10;
 
