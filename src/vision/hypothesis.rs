@@ -686,22 +686,31 @@ mod tests {
         )
     }
 
-    #[test]
-    fn reach_rejects_only_placements_member_cover_rejects() {
-        let cands = gapped_candidate();
-        let c = cands.list[0];
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut uniform = |lo: f64, hi: f64| {
+    /// Uniform draws in `[lo, hi)` from a linear congruential sequence.
+    fn uniform_from(mut state: u64) -> impl FnMut(f64, f64) -> f64 {
+        move |lo, hi| {
             state = state
                 .wrapping_mul(6_364_136_223_846_793_005)
                 .wrapping_add(1_442_695_040_888_963_407);
             lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
-        };
+        }
+    }
+
+    /// A segment near [`gapped_candidate`]'s line, of any length and direction along it.
+    fn segment_near_line(uniform: &mut impl FnMut(f64, f64) -> f64) -> ([f64; 2], [f64; 2]) {
+        let tip = [uniform(-30.0, 30.0), uniform(-2.0, 2.0)];
+        let far = [tip[0] + uniform(-60.0, 60.0), tip[1] + uniform(-4.0, 4.0)];
+        (tip, far)
+    }
+
+    #[test]
+    fn reach_rejects_only_placements_member_cover_rejects() {
+        let cands = gapped_candidate();
+        let c = cands.list[0];
+        let mut uniform = uniform_from(0x2545_f491_4f6c_dd1d);
         let (mut rejected, mut accepted) = (0, 0);
         for _ in 0..20_000 {
-            // Segments near the line, of every length and direction along it.
-            let tip = [uniform(-30.0, 30.0), uniform(-2.0, 2.0)];
-            let far = [tip[0] + uniform(-60.0, 60.0), tip[1] + uniform(-4.0, 4.0)];
+            let (tip, far) = segment_near_line(&mut uniform);
             let pose = Pose {
                 psi: 0.0,
                 scale: uniform(0.1, 3.0),
@@ -727,18 +736,11 @@ mod tests {
     fn scale_range_holds_every_scale_member_cover_accepts() {
         let cands = gapped_candidate();
         let c = cands.list[0];
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut uniform = |lo: f64, hi: f64| {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
-        };
+        let mut uniform = uniform_from(0x9e37_79b9_7f4a_7c15);
         let (mut outside, mut accepted) = (0, 0);
         for _ in 0..2_000 {
-            // A pair's line of apexes `a0 + scale * a1` and a segment near the line.
-            let tip = [uniform(-30.0, 30.0), uniform(-2.0, 2.0)];
-            let far = [tip[0] + uniform(-60.0, 60.0), tip[1] + uniform(-4.0, 4.0)];
+            let (tip, far) = segment_near_line(&mut uniform);
+            // A pair's line of apexes `a0 + scale * a1`.
             let a0 = [uniform(0.0, 300.0), uniform(70.0, 95.0)];
             let a1 = [uniform(-80.0, 80.0), uniform(-5.0, 5.0)];
             let reach = Reach::new(&cands, &c, (tip, far)).unwrap();
