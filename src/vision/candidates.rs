@@ -18,7 +18,7 @@ const DUPLICATE_PX: f64 = 1.0;
 const COVERED_ANGLE_RAD: f64 = 0.026;
 const COVERED_PX: f64 = 1.5;
 /// Line candidates kept per edge: the distinct lines of its strongest Hough peaks.
-pub const CANDIDATES_PER_EDGE: usize = 12;
+pub const CANDIDATES_PER_EDGE: usize = 16;
 
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
 pub const PROFILE_BINS: usize = 1024;

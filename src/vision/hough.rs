@@ -25,7 +25,7 @@ pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 /// peaks find the line again and are dropped. Keeping more peaks than candidates
 /// (`candidates::CANDIDATES_PER_EDGE`) lets a shorter line beside long ones (a face
 /// beside the stripes of a patterned sample) still reach the search.
-pub const PEAKS_PER_EDGE: usize = 20;
+pub const PEAKS_PER_EDGE: usize = 26;
 /// Fewest (smoothed, so twice the pixel count) votes for a peak.
 const MIN_VOTES: u16 = 10;
 
