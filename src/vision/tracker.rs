@@ -303,18 +303,17 @@ impl PyramidTracker {
         });
         // Faces that the detection image breaks up under strong noise: when the
         // faintest calibrated edge steps by fewer than RETRY_CONTRAST_NOISES of this
-        // frame's gradient noise, its Canny seeds (5 noises) are chance, and the frame is
+        // frame's gradient noise, its Canny seeds (5 noises) are chance, and a frame
+        // missed for any reason (no tip found, or the tips found refused: a face's
+        // pieces can make a wrong placement that the verification refuses) is
         // searched again binned twice as coarsely (half the noise per detection pixel,
         // the same step), as long as the tip stays large enough there to be placed.
-        let broken = matches!(
-            estimate.miss,
-            Some(Miss::NoCandidates | Miss::Inconsistent | Miss::LowConfidence)
-        );
+        let missed = !estimate.detected;
         let faintest = Edge::ALL
             .map(|e| self.calibration.edge(e).contrast.abs())
             .into_iter()
             .fold(f64::INFINITY, f64::min);
-        if broken && faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise) {
+        if missed && faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise) {
             let det = self.stages(frame, None, own, COARSE_RETRY * base);
             self.search_stages(det, &template);
             if let Some(e) = self
