@@ -465,18 +465,26 @@ fn plausible(t: &Template, pose: &Pose, size: [f64; 2]) -> bool {
     if !(SCALE_MIN..=SCALE_MAX).contains(&pose.scale) || t.height * pose.scale < MIN_HEIGHT_PX {
         return false;
     }
-    let [x, y] = pose.apex;
-    x > -size[0] && x < 2.0 * size[0] && y > -size[1] && y < 2.0 * size[1]
+    apex_bounds(size)
+        .iter()
+        .zip(pose.apex)
+        .all(|(&[lo, hi], x)| x > lo && x < hi)
+}
+
+/// The open bounds of a [`plausible`] apex, per coordinate: no further outside the
+/// image than the image is large.
+fn apex_bounds(size: [f64; 2]) -> [[f64; 2]; 2] {
+    size.map(|s| [-s, 2.0 * s])
 }
 
 /// The scales at which a pose whose apex is `a0 + scale * a1` can be [`plausible`] (a
 /// superset: the apex's bounds are open there).
 fn plausible_scales(t: &Template, size: [f64; 2], a0: [f64; 2], a1: [f64; 2]) -> [f64; 2] {
     let mut range = [SCALE_MIN.max(MIN_HEIGHT_PX / t.height), SCALE_MAX];
-    for i in 0..2 {
-        // -size < a0 + scale * a1 < 2 size
-        at_most(&mut range, a1[i], 2.0 * size[i] - a0[i]);
-        at_most(&mut range, -a1[i], a0[i] + size[i]);
+    for (i, [lo, hi]) in apex_bounds(size).into_iter().enumerate() {
+        // lo < a0 + scale * a1 < hi
+        at_most(&mut range, a1[i], hi - a0[i]);
+        at_most(&mut range, -a1[i], a0[i] - lo);
     }
     range
 }
