@@ -121,7 +121,7 @@ fn suite_of_600_frames_over_real_backgrounds() {
     assert!(sc.angle_err_median_deg <= 0.033, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.13, "{why}");
     assert!(sc.tip_err_median_px <= 0.3, "{why}");
-    // The reported sigma is honest here too (0.74; 2 of 571 beyond 4 sigma).
+    // The reported sigma is honest here too (0.69; 1 of 572 beyond 4 sigma).
     let median_z = zs[zs.len() / 2];
     assert!(
         (0.5..=0.9).contains(&median_z),

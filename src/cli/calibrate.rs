@@ -397,7 +397,7 @@ pub fn calibration_block(
     }
     out.push_str(
         "# Refined on the reference image (degrees, CCW on screen, +- the standard error\n\
-         # from the reference's noise); from the clicks alone:\n",
+         # of the reading, the background beside the edge included); from the clicks alone:\n",
     );
     for edge in [Edge::Red, Edge::Blue, Edge::Green] {
         let e = calibration.edge(edge);

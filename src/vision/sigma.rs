@@ -2,9 +2,11 @@
 //!
 //! The grey-level fit (`refine`) gives the rotation's standard error from its normal
 //! equations: its residual noise times the square root of the rotation's element of
-//! the inverse of the weighted normal matrix, with the calibration's share (each edge's
-//! orientation error on the reference, which the fit ties the edges by) added in
-//! quadrature. Two things that formula leaves out make it a little low:
+//! the inverse of the weighted normal matrix, with the calibration's share added in
+//! quadrature: each edge's orientation error on the reference
+//! (`CalibratedEdge::orientation_sigma_deg`, which counts the reference's background
+//! beside the edge), combined with the weights the fit ties the edges by
+//! (`refine::Tie`). Two things the formula leaves out make it a little low:
 //! - **The robust weights.** The fit weighs residuals beyond 1.5 times its measured
 //!   noise down (Huber), and measures the noise as the RMS of the weighted
 //!   residuals. On Gaussian noise that measured noise settles at 0.93 of the true one,

@@ -15,7 +15,7 @@
 use image::GrayImage;
 
 use super::bands::{bands, bend_prior, refined_pose, visible_segment};
-use super::calibration::Calibration;
+use super::calibration::{CalibratedEdge, Calibration};
 use super::candidates::Candidates;
 use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
 use super::edges::EdgeMap;
@@ -24,7 +24,7 @@ use super::hough::Hough;
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::options::{CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
-use super::refine::{half_width, Band, FitResult, Refiner, Turns};
+use super::refine::{half_width, Band, FitResult, Refiner, Tie, Turns};
 use super::rigid::{calibrate as calibrate_rigid, RigidError, RigidTemplate, RigidTracker};
 use super::stations;
 use super::template::{Pose, Template, BLUE, GREEN, RED};
@@ -185,8 +185,12 @@ impl PyramidTracker {
         calibration: Calibration,
         cantilever: Option<Cantilever>,
     ) -> PyramidTracker {
-        let tied =
-            Turns::Tied(Edge::ALL.map(|e| calibration.edge(e).orientation_sigma_deg.to_radians()));
+        let sigma =
+            |f: fn(&CalibratedEdge) -> f64| Edge::ALL.map(|e| f(calibration.edge(e)).to_radians());
+        let tied = Turns::Tied(Tie {
+            weigh: sigma(|e| e.orientation_noise_sigma_deg),
+            error: sigma(|e| e.orientation_sigma_deg),
+        });
         PyramidTracker {
             threshold: cfg.threshold,
             window_rad: cfg.window_deg.to_radians(),
@@ -675,7 +679,7 @@ impl PyramidTracker {
             force_saturated: false,
             apex_px: Some(apex),
             edges,
-            angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_sigma)),
+            angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_error_sigma)),
             // Measured only by the beam edge's distance from the apex; the faces alone
             // leave it free over a range.
             scale: fitted_edges(bands, fit)[RED].then_some(pose.scale),

@@ -32,7 +32,6 @@ impl Refiner {
         st.g = [0.0; 3 * CHUNKS_PER_EDGE];
         let mut sq = [0.0f64; 3];
         let mut wsum = [0.0f64; 3];
-        let blur = x[P_BLUR];
         let normals: [[f64; 2]; 3] = std::array::from_fn(|e| {
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
             frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
@@ -51,16 +50,7 @@ impl Refiner {
                 p0 + 2,
                 p0 + 3,
             ];
-            let params = EdgeParams {
-                normal: normals[e],
-                along: along(normals[e]),
-                offset: x[P_OFFSET + e],
-                bend: x[P_BEND],
-                inv_blur: 1.0 / blur,
-                corner_t: dot(along(normals[e]), sub(f.corner, f.origin)),
-                photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
-                huber: 1.5 * noise[e],
-            };
+            let params = EdgeParams::new(f, normals[e], x, e, noise[e]);
             let range = self.ranges[e].clone();
             let mut acc =
                 accumulate_edge(&self.samples[range], step, f, &params, &mut self.stretches);
@@ -149,6 +139,24 @@ struct EdgeParams {
     photo: [f64; 4],
     /// Huber threshold on the residual, grey levels.
     huber: f64,
+}
+
+impl EdgeParams {
+    /// Edge `e`'s parameters in `x` with its line's inward normal `normal`, and the
+    /// Huber threshold for its residual noise `noise`.
+    fn new(f: &EdgeFrame, normal: [f64; 2], x: &[f64; N_PARAMS], e: usize, noise: f64) -> Self {
+        let p0 = P_PHOTO + PHOTO * e;
+        EdgeParams {
+            normal,
+            along: along(normal),
+            offset: x[P_OFFSET + e],
+            bend: x[P_BEND],
+            inv_blur: 1.0 / x[P_BLUR],
+            corner_t: dot(along(normal), sub(f.corner, f.origin)),
+            photo: [x[p0], x[p0 + 1], x[p0 + 2], x[p0 + 3]],
+            huber: 1.5 * noise,
+        }
+    }
 }
 
 /// One edge's contribution to the normal equations, in the local parameter order
@@ -570,5 +578,114 @@ impl Batch {
             cdf,
             from_fn(|l| cdf[l] * un[l]),
         ];
+    }
+}
+
+/// What one stretch adds to a fit with free rotations, for the rotations'
+/// cluster-robust standard errors (`Refiner::clustered_turn_sigma`); local parameter
+/// order (see [`EdgeSums`]).
+pub(super) struct StretchShare {
+    /// Its index among the bands' stretches.
+    pub stretch: usize,
+    /// Its score: the sum over its samples of robust weight x residual x Jacobian.
+    pub score: [f64; 8],
+    /// Its share of the normal matrix, its own outside level eliminated (with that
+    /// level's prior): with the fit's robust weights, and with the M-estimator's
+    /// derivative of the weighted residual (1 within the Huber threshold, 0 beyond).
+    pub fitted: [[f64; 8]; 8],
+    pub psi: [[f64; 8]; 8],
+}
+
+/// A stretch's normal-matrix terms with one kind of sample weight: the local block,
+/// the level's products with the local parameters, and with itself.
+#[derive(Clone, Copy)]
+struct LevelBlock {
+    h: [[f64; 8]; 8],
+    row: [f64; 8],
+    hh: f64,
+}
+
+impl LevelBlock {
+    const ZERO: LevelBlock = LevelBlock {
+        h: [[0.0; 8]; 8],
+        row: [0.0; 8],
+        hh: 0.0,
+    };
+
+    fn add(&mut self, weight: f64, jac: &[f64; 8], q: f64) {
+        for a in 0..8 {
+            for b in 0..8 {
+                self.h[a][b] += weight * jac[a] * jac[b];
+            }
+            self.row[a] += weight * q * jac[a];
+        }
+        self.hh += weight * q * q;
+    }
+
+    /// The block with the level eliminated (its prior weight `prior` added).
+    fn reduced(&self, prior: f64) -> [[f64; 8]; 8] {
+        let hh = self.hh + prior;
+        std::array::from_fn(|a| {
+            std::array::from_fn(|b| self.h[a][b] - self.row[a] * self.row[b] / hh)
+        })
+    }
+}
+
+impl Refiner {
+    /// Each counted stretch's [`StretchShare`] at the parameters `x`, each edge's
+    /// rotation its own, the Huber thresholds from the residual noises `noise`. A
+    /// calibration's cost (one more pass over the samples), not the tracker's.
+    pub(super) fn stretch_shares(
+        &self,
+        frames: &[Option<EdgeFrame>; 3],
+        x: &[f64; N_PARAMS],
+        noise: &[f64; 3],
+    ) -> Vec<StretchShare> {
+        let mut score = vec![[0.0; 8]; 3 * CHUNKS_PER_EDGE];
+        let mut blocks = vec![[LevelBlock::ZERO; 2]; 3 * CHUNKS_PER_EDGE];
+        let mut counted = [false; 3 * CHUNKS_PER_EDGE];
+        let table = cdf_table();
+        let mut m = ModelLanes::default();
+        for (e, f) in frames.iter().enumerate() {
+            let Some(f) = f else { continue };
+            let normal = rotate(f.normal0, x[P_TURN + e]);
+            let params = EdgeParams::new(f, normal, x, e, noise[e]);
+            let samples = &self.samples[self.ranges[e].clone()];
+            for first in (0..samples.len()).step_by(LANES) {
+                let batch = Batch::take(samples, first, 1);
+                batch.model(table, f, &params, &self.stretches.level, &mut m);
+                for l in 0..batch.len {
+                    let c = batch.chunk[l];
+                    if !self.stretches.ok[c] {
+                        continue;
+                    }
+                    counted[c] = true;
+                    let jac: [f64; 8] = std::array::from_fn(|a| m.jac[a][l]);
+                    let psi = m.weight[l] * m.r[l];
+                    for (s, j) in score[c].iter_mut().zip(&jac) {
+                        *s += psi * j;
+                    }
+                    let inside = if m.r[l].abs() <= params.huber {
+                        1.0
+                    } else {
+                        0.0
+                    };
+                    blocks[c][0].add(m.weight[l], &jac, m.q[l]);
+                    blocks[c][1].add(inside, &jac, m.q[l]);
+                }
+            }
+        }
+        (0..3 * CHUNKS_PER_EDGE)
+            .filter(|&c| counted[c])
+            .map(|c| {
+                let prior = pixel_weight(noise[c / CHUNKS_PER_EDGE], STRETCH_LEVEL_SIGMA, 1);
+                StretchShare {
+                    stretch: c,
+                    score: score[c],
+                    fitted: blocks[c][0].reduced(prior),
+                    psi: blocks[c][1].reduced(prior),
+                }
+            })
+            .collect()
     }
 }
