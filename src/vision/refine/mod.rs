@@ -183,17 +183,6 @@ pub struct Tie {
     pub error: [f64; 3],
 }
 
-#[cfg(test)]
-impl Tie {
-    /// Both the same: the calibration's errors are its pixel noise's.
-    pub fn noise(sigma: [f64; 3]) -> Tie {
-        Tie {
-            weigh: sigma,
-            error: sigma,
-        }
-    }
-}
-
 /// Smallest calibration standard error of an edge's orientation that [`Turns::Tied`]
 /// takes, radians (0.001 deg): below it the tie is rigid for all purposes, and a
 /// vanishing one would make the normal equations singular.
@@ -1139,6 +1128,24 @@ mod tests {
         );
     }
 
+    /// The strip's fit with tied edges, each edge's calibration error `sigma` (radians)
+    /// both weighing it and reported.
+    fn tied_fit(img: &GrayImage, sigma: [f64; 3], noise0: Option<[f64; 3]>) -> FitResult {
+        Refiner::default()
+            .fit(
+                img,
+                &strip_bands(),
+                Turns::Tied(Tie {
+                    weigh: sigma,
+                    error: sigma,
+                }),
+                1.0,
+                noise0,
+                false,
+            )
+            .unwrap()
+    }
+
     #[test]
     fn tied_edges_give_the_calibration_weighted_mean_and_its_error() {
         // The two edges disagree by 0.2 deg, more than either frame measurement's error:
@@ -1148,16 +1155,7 @@ mod tests {
         let (top, bottom) = (0.2f64.to_radians(), 0.0);
         let img = strip(top, bottom, 1.0);
         let sigma = [f64::NAN, 0.1f64.to_radians(), 0.01f64.to_radians()];
-        let fit = Refiner::default()
-            .fit(
-                &img,
-                &strip_bands(),
-                Turns::Tied(Tie::noise(sigma)),
-                1.0,
-                None,
-                false,
-            )
-            .unwrap();
+        let fit = tied_fit(&img, sigma, None);
         // The frame measures each edge to a few thousandths of a degree here, so the
         // tie hardly moves them, and the tip's turn is their calibration-weighted mean.
         let [_, Some(b), Some(g)] = fit.edges else {
@@ -1224,28 +1222,10 @@ mod tests {
                 .clamp(0.0, 255.0) as u8;
         }
         let sigma = [f64::NAN, 0.02f64.to_radians(), 0.02f64.to_radians()];
-        let cold = Refiner::default()
-            .fit(
-                &img,
-                &strip_bands(),
-                Turns::Tied(Tie::noise(sigma)),
-                1.0,
-                None,
-                false,
-            )
-            .unwrap();
+        let cold = tied_fit(&img, sigma, None);
         let noise = cold.noise();
         assert!(noise[1] > 20.0 && noise[1] < 30.0, "{noise:?}");
-        let warm = Refiner::default()
-            .fit(
-                &img,
-                &strip_bands(),
-                Turns::Tied(Tie::noise(sigma)),
-                1.0,
-                Some(noise),
-                false,
-            )
-            .unwrap();
+        let warm = tied_fit(&img, sigma, Some(noise));
         assert!(
             (warm.turn - cold.turn).abs() < 0.02 * cold.turn_sigma,
             "warm {} cold {} sigma {}",
