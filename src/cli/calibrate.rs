@@ -397,15 +397,18 @@ pub fn calibration_block(
     }
     out.push_str(
         "# Refined on the reference image (degrees, CCW on screen, +- the standard error\n\
-         # of the reading, the background beside the edge included); from the clicks alone:\n",
+         # of the reading, the background beside the edge included, and the pixel noise's\n\
+         # share alone: where the two differ, the ground beside the edge limits the reading);\n\
+         # from the clicks alone:\n",
     );
     for edge in [Edge::Red, Edge::Blue, Edge::Green] {
         let e = calibration.edge(edge);
         out.push_str(&format!(
-            "#   {:<5} {:>9.3} +- {:.3}   (clicks {:>9.3}, {:+.3})\n",
+            "#   {:<5} {:>9.3} +- {:.3} (noise {:.3})   (clicks {:>9.3}, {:+.3})\n",
             edge.name(),
             e.orientation_deg,
             e.orientation_sigma_deg,
+            e.orientation_noise_sigma_deg,
             e.clicked_orientation_deg,
             e.clicked_orientation_deg - e.orientation_deg
         ));
