@@ -207,9 +207,9 @@ pub struct EdgeResult {
     /// rotation, the shared one's).
     pub turn_sigma: f64,
     /// With free rotations (calibration), the cluster-robust standard error of `turn`
-    /// when it exceeds `turn_sigma`: the sandwich `a' B a`, `a` the rotation's row of
-    /// the inverse normal matrix and `B` the sum over the band's stretches of the outer
-    /// products of their scores (weighted residuals times Jacobians). Background
+    /// when it exceeds `turn_sigma`: from the spread of the band's stretches' scores
+    /// (weighted residuals times Jacobians), each through the M-estimator's normal
+    /// matrix without that stretch (`Refiner::clustered_turn_sigma`). Background
     /// structure beside an edge leaves residuals correlated along it over several
     /// pixels, which `turn_sigma`, counting every pixel as independent, takes for
     /// noise; the stretches' scores spread with it. Otherwise `turn_sigma`.
@@ -722,7 +722,7 @@ impl Refiner {
         let (turn_sigma, turn_error_sigma) = match turns {
             Turns::Tied(t) => (
                 tip_sigma.hypot(tie_precision(frames, &t.weigh).recip().sqrt()),
-                tip_sigma.hypot(tie_error(frames, &t.weigh, &t.error)),
+                tip_sigma.hypot(tie_error(frames, weights, &t.error)),
             ),
             _ => (tip_sigma, tip_sigma),
         };
@@ -735,9 +735,7 @@ impl Refiner {
             bend: x[P_BEND],
         }
     }
-}
 
-impl Refiner {
     /// Each edge's rotation's cluster-robust standard error (radians; free rotations;
     /// see [`EdgeResult::turn_sigma_robust`]) at the parameters `x` of the last normal
     /// equations `ne`. Each stretch's influence on a rotation is its score through the
@@ -772,27 +770,26 @@ impl Refiner {
             add(&mut bread, s, &s.psi, 1.0);
             add(&mut bread, s, &s.fitted, -1.0);
         }
-        std::array::from_fn(|e| {
-            if frames[e].is_none() {
-                return 0.0;
+        let mut var = [0.0f64; 3];
+        for s in &shares {
+            let mut without = bread;
+            add(&mut without, s, &s.psi, -1.0);
+            let slots = self.slots[s.stretch / CHUNKS_PER_EDGE];
+            for e in (0..3).filter(|&e| frames[e].is_some()) {
+                let mut unit = [0.0; N_PARAMS];
+                unit[P_TURN + e] = 1.0;
+                var[e] += match solve(&without, &unit, &ne.fixed) {
+                    Some(a) => slots
+                        .iter()
+                        .zip(&s.score)
+                        .map(|(&k, g)| a[k] * g)
+                        .sum::<f64>()
+                        .powi(2),
+                    None => f64::INFINITY,
+                };
             }
-            let mut unit = [0.0; N_PARAMS];
-            unit[P_TURN + e] = 1.0;
-            shares
-                .iter()
-                .map(|s| {
-                    let mut without = bread;
-                    add(&mut without, s, &s.psi, -1.0);
-                    let Some(a) = solve(&without, &unit, &ne.fixed) else {
-                        return f64::INFINITY;
-                    };
-                    let slots = self.slots[s.stretch / CHUNKS_PER_EDGE];
-                    let v: f64 = slots.iter().zip(&s.score).map(|(&k, g)| a[k] * g).sum();
-                    v * v
-                })
-                .sum::<f64>()
-                .sqrt()
-        })
+        }
+        var.map(f64::sqrt)
     }
 }
 
@@ -869,17 +866,13 @@ fn tie_precision(frames: &[Option<EdgeFrame>; 3], sigma: &[f64; 3]) -> f64 {
 }
 
 /// The calibration's share of the tip's rotation's standard error with tied edges
-/// (radians): the edges' calibration errors `error` combined with the weights that
-/// make the tip's rotation (from `weigh`), `sqrt(sum w_e^2 error_e^2)` (with `error`
-/// the same as `weigh`, `1 / sqrt(tie_precision)`).
-fn tie_error(frames: &[Option<EdgeFrame>; 3], weigh: &[f64; 3], error: &[f64; 3]) -> f64 {
-    let total = tie_precision(frames, weigh);
+/// (radians): the edges' calibration errors `error` combined with the `weights` that
+/// make the tip's rotation ([`tip_weights`]), `sqrt(sum w_e^2 error_e^2)` (with the
+/// errors the weights come from, `1 / sqrt(tie_precision)`).
+fn tie_error(frames: &[Option<EdgeFrame>; 3], weights: &[f64; N_PARAMS], error: &[f64; 3]) -> f64 {
     (0..3)
         .filter(|&e| frames[e].is_some())
-        .map(|e| {
-            let w = tie_sigma(weigh, e).powi(-2) / total;
-            (w * tie_sigma(error, e)).powi(2)
-        })
+        .map(|e| (weights[P_TURN + e] * tie_sigma(error, e)).powi(2))
         .sum::<f64>()
         .sqrt()
 }
