@@ -75,9 +75,9 @@ pub struct CalibratedEdge {
     pub orientation_sigma_deg: f64,
     /// The part of it from the reference's pixel noise alone (the fit's normal
     /// equations): the tracker weighs a frame's edges by it as well as by the frame's
-    /// own noise (`refine::Turns::Tied`). Weighed by the larger one, estimated from a
-    /// few dozen stretches, the edges' weights scattered with it: the angle's p95 on
-    /// real-background seed 13 rose from 0.135 to 0.160 deg.
+    /// own noise (`refine::Turns::Tied`). Weights from the larger one, estimated from a
+    /// few dozen stretches, scatter with it: they put the angle's p95 on
+    /// real-background seed 13 at 0.160 deg against 0.135.
     pub orientation_noise_sigma_deg: f64,
 }
 
