@@ -18,7 +18,7 @@ use image::GrayImage;
 use nalgebra::{Matrix4, Vector4};
 
 use super::station::{Located, Stations};
-use super::{Bounds, Pose, RigidTemplate};
+use super::{Bounds, Pose, RigidEdge, RigidTemplate};
 use crate::vision::geometry::{add, bilinear, dot, rotate, scale, strip_mean, sub};
 use crate::vision::stations::{COVERED_APEX_SHARE, PAST_APEX_HALF_PX};
 use crate::vision::Miss;
@@ -522,7 +522,6 @@ impl Fitter {
                 }
                 continue;
             }
-            let share = held as f64 / in_view as f64;
             let n = in_view.min(MAX_STATIONS);
             steps[..n].sort_by(f64::total_cmp);
             let median_ratio = steps[n / 2];
@@ -531,6 +530,21 @@ impl Fitter {
                 levels[..m].sort_by(f64::total_cmp);
                 inside[e] = levels[m / 2];
             }
+            // Stations under a particle across the edge (`covered`) neither hold nor
+            // miss it, once the edge shows itself on enough others; the median step
+            // still counts them, so an edge more than half covered is refused.
+            let covered = if held >= MIN_IN_VIEW {
+                points()
+                    .filter(|p| {
+                        p.in_view
+                            && !Self::holds_final(t, &pose, p)
+                            && Self::covered(edge, p, inside[e])
+                    })
+                    .count()
+            } else {
+                0
+            };
+            let share = held as f64 / (in_view - covered) as f64;
             confidence = confidence.min(share);
             edges[e] = Some(Seen {
                 span,
@@ -654,6 +668,16 @@ impl Fitter {
             });
         let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out);
         carries_on && past.is_some_and(|v| (v - around) / (probe - around) < COVERED_APEX_SHARE)
+    }
+
+    /// Whether station `p` of `edge` lies under a body beyond the probe's level (brighter
+    /// than a brighter probe, darker than a darker one): its step the wrong way, its
+    /// inside more than [`COVERED_LEVEL`] of the step beyond `probe_level`, the level of
+    /// the edge's holding stations. The background lies on the other side of the
+    /// probe's level, so such a body is no background: a particle across the edge.
+    fn covered(edge: &RigidEdge, p: &Point, probe_level: f64) -> bool {
+        p.step <= -HOLD_SHARE
+            && (p.inside - probe_level) * edge.polarity > COVERED_LEVEL * edge.step
     }
 
     /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
@@ -813,6 +837,40 @@ mod tests {
                 .err()
                 .map(|r| r.0),
             Some(Miss::ScaleUnseen)
+        );
+    }
+
+    /// A particle brighter than a bright probe lying across part of its lower flank:
+    /// the stations under it step the wrong way from a level beyond the probe's, and
+    /// neither hold nor miss the flank, which its other stations show. A level at the
+    /// probe's there (a brighter background beside the flank) is no such body: those
+    /// stations miss it.
+    #[test]
+    fn a_particle_across_an_edge_does_not_hide_it() {
+        let t = crate::vision::rigid::needle_template();
+        let pose = Pose {
+            psi: 0.0,
+            scale: 1.0,
+            apex: [250.0, 100.0],
+        };
+        let frame = GrayImage::new(320, 240);
+        let with_stations = |inside: f64| {
+            let mut f = fitter(&t, &pose, true);
+            for p in f.points.iter_mut().filter(|p| p.edge == 2).skip(2).take(4) {
+                p.step = -1.5;
+                p.inside = inside;
+            }
+            f
+        };
+        let mut under_particle = with_stations(240.0);
+        assert!(under_particle.verify(&frame, &t, pose, 1e-4, 0.3).is_ok());
+        let mut beside_brighter = with_stations(180.0);
+        assert_eq!(
+            beside_brighter
+                .verify(&frame, &t, pose, 1e-4, 0.3)
+                .err()
+                .map(|r| r.0),
+            Some(Miss::EdgeMissing(t.edges[2].name))
         );
     }
 }
