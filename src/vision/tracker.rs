@@ -432,15 +432,21 @@ impl PyramidTracker {
         // Placements on another probe's claimed pyramid are not this probe's.
         let (excluded, pyr) = (&self.excluded, &det.pyr);
         let ruled_out = |apex: [f64; 2]| claimed(excluded, pyr.to_frame(apex));
-        let Some(hyp) = self
+        if self
             .search
             .run(t, &self.cands, &det.edges, prior, &ruled_out)
-        else {
-            return Some(Estimate::missed(Miss::Inconsistent, 0.0));
-        };
-        if !complete(&hyp) {
+            .is_none()
+        {
             return Some(Estimate::missed(Miss::Inconsistent, 0.0));
         }
+        // The shortlist is ranked by support, and a placement many times the tip's
+        // size along a background's long straight lines can outscore the tip while
+        // showing only one edge (a dark probe at 1200x beside a sample's rails: the
+        // tip, complete, ranked second). The best-ranked placement that shows two
+        // edges is the search's choice.
+        let Some(hyp) = self.search.ranked().iter().find(|h| complete(h)).copied() else {
+            return Some(Estimate::missed(Miss::Inconsistent, 0.0));
+        };
         let first = self.evaluate(frame, t, &hyp);
         if first.confidence >= SURE_CONFIDENCE {
             return Some(first);
