@@ -5,7 +5,7 @@
 
 use super::edges::EdgePoint;
 use super::geometry::{along, clip_to_rect, dot, scale, sub, wrap_pi};
-use super::hough::{Peak, PEAKS_PER_EDGE};
+use super::hough::{Peak, WIDE_PEAKS_PER_EDGE};
 
 /// Inlier band half-width around a candidate line, detection pixels.
 const INLIER_PX: f64 = 1.5;
@@ -19,6 +19,8 @@ const COVERED_ANGLE_RAD: f64 = 0.026;
 const COVERED_PX: f64 = 1.5;
 /// Line candidates kept per edge: the distinct lines of its strongest Hough peaks.
 pub const CANDIDATES_PER_EDGE: usize = 16;
+/// Candidates per edge of a wide search ([`Candidates::set_wide`]).
+pub const WIDE_CANDIDATES_PER_EDGE: usize = 24;
 
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
 pub const PROFILE_BINS: usize = 1024;
@@ -50,9 +52,17 @@ pub struct Candidates {
     pub list: Vec<Candidate>,
     prefix: Vec<u16>,
     marks: Vec<u8>,
+    /// Keeps [`WIDE_CANDIDATES_PER_EDGE`] per edge instead of [`CANDIDATES_PER_EDGE`].
+    wide: bool,
 }
 
 impl Candidates {
+    /// Keeps [`WIDE_CANDIDATES_PER_EDGE`] candidates per edge from now on (`wide`), or
+    /// [`CANDIDATES_PER_EDGE`].
+    pub fn set_wide(&mut self, wide: bool) {
+        self.wide = wide;
+    }
+
     /// Polishes every peak into a candidate; `voters[e]` lists the points that could
     /// belong to edge e (the Hough stage's polarity test).
     pub fn build(
@@ -65,13 +75,18 @@ impl Candidates {
     ) {
         self.list.clear();
         // Sized for the most peaks there can be: no growth from frame to frame.
-        let most = 3 * PEAKS_PER_EDGE;
+        let most = 3 * WIDE_PEAKS_PER_EDGE;
+        let per_edge = if self.wide {
+            WIDE_CANDIDATES_PER_EDGE
+        } else {
+            CANDIDATES_PER_EDGE
+        };
         debug_assert!(peaks.len() <= most);
         self.list.reserve(most);
         self.prefix.resize(most * (PROFILE_BINS + 1), 0);
         self.marks.resize(PROFILE_BINS, 0);
         for (slot, peak) in peaks.iter().enumerate() {
-            if self.list.iter().filter(|o| o.edge == peak.edge).count() >= CANDIDATES_PER_EDGE {
+            if self.list.iter().filter(|o| o.edge == peak.edge).count() >= per_edge {
                 continue;
             }
             let nu = normal_angles[peak.edge] + peak.psi;

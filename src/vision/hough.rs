@@ -26,6 +26,8 @@ pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 /// (`candidates::CANDIDATES_PER_EDGE`) lets a shorter line beside long ones (a face
 /// beside the stripes of a patterned sample) still reach the search.
 pub const PEAKS_PER_EDGE: usize = 26;
+/// Peaks kept per edge by a wide search ([`Hough::set_wide`]).
+pub const WIDE_PEAKS_PER_EDGE: usize = 40;
 /// Fewest (smoothed, so twice the pixel count) votes for a peak.
 const MIN_VOTES: u16 = 10;
 
@@ -63,6 +65,8 @@ pub struct Hough {
     pixels: usize,
     /// Per edge, the indices of the points that voted for it (polarity-compatible).
     pub voters: [Vec<u32>; 3],
+    /// Keeps [`WIDE_PEAKS_PER_EDGE`] peaks per edge instead of [`PEAKS_PER_EDGE`].
+    wide: bool,
     /// Scratch of `find_peaks`: which cells of a row are the maximum of their row.
     row_max: Vec<u8>,
 }
@@ -106,7 +110,7 @@ impl Hough {
         self.votes_span.resize(3 * n_psi, (usize::MAX, 0));
         self.smooth_span.clear();
         self.smooth_span.resize(3 * n_psi, (usize::MAX, 0));
-        self.peaks.reserve(3 * PEAKS_PER_EDGE);
+        self.peaks.reserve(3 * WIDE_PEAKS_PER_EDGE);
     }
 
     fn psi_of(&self, k: usize) -> f64 {
@@ -163,7 +167,15 @@ impl Hough {
         }
     }
 
-    /// Fills `self.peaks` with up to [`PEAKS_PER_EDGE`] best local maxima per edge.
+    /// Keeps [`WIDE_PEAKS_PER_EDGE`] peaks per edge from now on (`wide`), or
+    /// [`PEAKS_PER_EDGE`]: a wide search lets a short face beside many long lines
+    /// reach the search.
+    pub fn set_wide(&mut self, wide: bool) {
+        self.wide = wide;
+    }
+
+    /// Fills `self.peaks` with up to [`PEAKS_PER_EDGE`] best local maxima per edge
+    /// ([`WIDE_PEAKS_PER_EDGE`] in a wide search).
     pub fn find_peaks(&mut self) {
         find_peaks(self);
     }
@@ -172,6 +184,11 @@ impl Hough {
     #[inline(always)]
     fn find_peaks_body(&mut self) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
+        let most = if self.wide {
+            WIDE_PEAKS_PER_EDGE
+        } else {
+            PEAKS_PER_EDGE
+        };
         for row in 0..3 * n_psi {
             let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
             let old = self.smooth_span[row];
@@ -220,7 +237,7 @@ impl Hough {
                                 rho: self.rho_min + i as f64,
                                 votes: v,
                             };
-                            insert_top(&mut self.peaks, first, peak);
+                            insert_top(&mut self.peaks, first, peak, most);
                         }
                     }
                 }
@@ -274,18 +291,18 @@ dispatch! {
     fn find_peaks(hough: &mut Hough) => Hough::find_peaks_body
 }
 
-/// Inserts `peak` into the descending list `peaks[first..]`, keeping at most
-/// [`PEAKS_PER_EDGE`] entries there.
-fn insert_top(peaks: &mut Vec<Peak>, first: usize, peak: Peak) {
+/// Inserts `peak` into the descending list `peaks[first..]`, keeping at most `most`
+/// entries there.
+fn insert_top(peaks: &mut Vec<Peak>, first: usize, peak: Peak, most: usize) {
     let n = peaks.len() - first;
-    if n == PEAKS_PER_EDGE && peaks[peaks.len() - 1].votes >= peak.votes {
+    if n == most && peaks[peaks.len() - 1].votes >= peak.votes {
         return;
     }
     let pos = peaks[first..]
         .iter()
         .position(|q| q.votes < peak.votes)
         .map_or(peaks.len(), |p| p + first);
-    if n == PEAKS_PER_EDGE {
+    if n == most {
         peaks.pop();
     }
     peaks.insert(pos, peak);
@@ -347,12 +364,35 @@ mod tests {
                 rho: 0.0,
                 votes,
             };
-            insert_top(&mut v, 0, peak);
+            insert_top(&mut v, 0, peak, PEAKS_PER_EDGE);
         }
         let got: Vec<u16> = v.iter().map(|p| p.votes).collect();
         let mut expected = all.clone();
         expected.sort_by(|a, b| b.cmp(a));
         expected.truncate(PEAKS_PER_EDGE);
         assert_eq!(got, expected);
+    }
+
+    /// Thirty long lines of one polarity fill an edge's peaks; a short one beside them
+    /// reaches only a wide search's.
+    #[test]
+    fn a_wide_search_keeps_a_short_line_beside_many_long_ones() {
+        let normals = [90f64.to_radians(), 0.0, 180f64.to_radians()];
+        let mut pts = Vec::new();
+        for k in 0..30 {
+            pts.extend(line_points(0.0, -90.0 + 6.0 * f64::from(k), 90.0, 120));
+        }
+        pts.extend(line_points(0.0, 100.0, 90.0, 25));
+        let short_kept = |wide: bool| {
+            let mut h = Hough::default();
+            h.set_wide(wide);
+            h.configure(320, 240, 20f64.to_radians(), normals);
+            h.vote(&pts, 1.0);
+            h.find_peaks();
+            let short = h.peaks.iter().find(|p| p.edge == 0 && p.votes < 100);
+            short.is_some_and(|p| p.psi.abs() < 0.01 && (p.rho - 200.0).abs() <= 1.0)
+        };
+        assert!(!short_kept(false));
+        assert!(short_kept(true));
     }
 }

@@ -345,6 +345,25 @@ impl PyramidTracker {
                 }
             }
         }
+        // A short face beside many long lines of the background (grain boundaries,
+        // a sample's rails) can be crowded out of the Hough peaks and candidates
+        // kept per edge, so that no placement near the tip is ever made: a frame
+        // still missed is searched once more on its detection image with more of
+        // them kept (WIDE_PEAKS_PER_EDGE, WIDE_CANDIDATES_PER_EDGE).
+        if !estimate.detected {
+            let det = self.stages(frame, shared, own, base);
+            self.hough.set_wide(true);
+            self.cands.set_wide(true);
+            self.search_stages(det, &template);
+            let wide = self
+                .attempt(frame, det, &template, None)
+                .filter(|e| e.detected);
+            self.hough.set_wide(false);
+            self.cands.set_wide(false);
+            if let Some(e) = wide {
+                estimate = e;
+            }
+        }
         self.last = match (estimate.detected, estimate.angle_deg) {
             (true, Some(a)) => Some(Last {
                 psi: -a.to_radians(),
