@@ -816,26 +816,37 @@ mod tests {
         f
     }
 
-    /// The two edges meeting at the apex, holding everywhere, are any corner of their
-    /// angle: without an edge away from the apex in view the pose is refused as
-    /// `scale-unseen`; with the lower flank in view it is verified.
-    #[test]
-    fn a_corner_alone_does_not_show_the_probe() {
-        let t = crate::vision::rigid::needle_template();
+    /// The needle template at rest in a blank frame (the stations carry the readings).
+    fn needle_at_rest() -> (RigidTemplate, Pose, GrayImage) {
         let pose = Pose {
             psi: 0.0,
             scale: 1.0,
             apex: [250.0, 100.0],
         };
-        let frame = GrayImage::new(320, 240);
-        let mut seen = fitter(&t, &pose, true);
-        assert!(seen.verify(&frame, &t, pose, 1e-4, 0.3).is_ok());
-        let mut corner = fitter(&t, &pose, false);
+        (
+            crate::vision::rigid::needle_template(),
+            pose,
+            GrayImage::new(320, 240),
+        )
+    }
+
+    /// What `f`'s stations are refused for at `pose`, if anything.
+    fn refusal(f: &mut Fitter, t: &RigidTemplate, pose: Pose, frame: &GrayImage) -> Option<Miss> {
+        f.verify(frame, t, pose, 1e-4, 0.3).err().map(|r| r.0)
+    }
+
+    /// The two edges meeting at the apex, holding everywhere, are any corner of their
+    /// angle: without an edge away from the apex in view the pose is refused as
+    /// `scale-unseen`; with the lower flank in view it is verified.
+    #[test]
+    fn a_corner_alone_does_not_show_the_probe() {
+        let (t, pose, frame) = needle_at_rest();
         assert_eq!(
-            corner
-                .verify(&frame, &t, pose, 1e-4, 0.3)
-                .err()
-                .map(|r| r.0),
+            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame),
+            None
+        );
+        assert_eq!(
+            refusal(&mut fitter(&t, &pose, false), &t, pose, &frame),
             Some(Miss::ScaleUnseen)
         );
     }
@@ -847,13 +858,7 @@ mod tests {
     /// stations miss it.
     #[test]
     fn a_particle_across_an_edge_does_not_hide_it() {
-        let t = crate::vision::rigid::needle_template();
-        let pose = Pose {
-            psi: 0.0,
-            scale: 1.0,
-            apex: [250.0, 100.0],
-        };
-        let frame = GrayImage::new(320, 240);
+        let (t, pose, frame) = needle_at_rest();
         let with_stations = |inside: f64| {
             let mut f = fitter(&t, &pose, true);
             for p in f.points.iter_mut().filter(|p| p.edge == 2).skip(2).take(4) {
@@ -862,14 +867,9 @@ mod tests {
             }
             f
         };
-        let mut under_particle = with_stations(240.0);
-        assert!(under_particle.verify(&frame, &t, pose, 1e-4, 0.3).is_ok());
-        let mut beside_brighter = with_stations(180.0);
+        assert_eq!(refusal(&mut with_stations(240.0), &t, pose, &frame), None);
         assert_eq!(
-            beside_brighter
-                .verify(&frame, &t, pose, 1e-4, 0.3)
-                .err()
-                .map(|r| r.0),
+            refusal(&mut with_stations(180.0), &t, pose, &frame),
             Some(Miss::EdgeMissing(t.edges[2].name))
         );
     }
