@@ -19,7 +19,7 @@ const COVERED_ANGLE_RAD: f64 = 0.026;
 const COVERED_PX: f64 = 1.5;
 /// Line candidates kept per edge: the distinct lines of its strongest Hough peaks.
 pub const CANDIDATES_PER_EDGE: usize = 16;
-/// Candidates per edge of a wide search ([`Candidates::set_wide`]).
+/// Candidates per edge of a wide search (with [`WIDE_PEAKS_PER_EDGE`] peaks).
 pub const WIDE_CANDIDATES_PER_EDGE: usize = 24;
 
 /// Profile bins per candidate (longer lines are clipped; the detection image is small).
@@ -52,19 +52,13 @@ pub struct Candidates {
     pub list: Vec<Candidate>,
     prefix: Vec<u16>,
     marks: Vec<u8>,
-    /// Keeps [`WIDE_CANDIDATES_PER_EDGE`] per edge instead of [`CANDIDATES_PER_EDGE`].
-    wide: bool,
 }
 
 impl Candidates {
-    /// Keeps [`WIDE_CANDIDATES_PER_EDGE`] candidates per edge from now on (`wide`), or
-    /// [`CANDIDATES_PER_EDGE`].
-    pub fn set_wide(&mut self, wide: bool) {
-        self.wide = wide;
-    }
-
-    /// Polishes every peak into a candidate; `voters[e]` lists the points that could
-    /// belong to edge e (the Hough stage's polarity test).
+    /// Polishes every peak into a candidate, keeping at most `per_edge` per edge
+    /// ([`CANDIDATES_PER_EDGE`], or [`WIDE_CANDIDATES_PER_EDGE`] in a wide search);
+    /// `voters[e]` lists the points that could belong to edge e (the Hough stage's
+    /// polarity test).
     pub fn build(
         &mut self,
         peaks: &[Peak],
@@ -72,15 +66,11 @@ impl Candidates {
         voters: &[Vec<u32>; 3],
         normal_angles: [f64; 3],
         size: [usize; 2],
+        per_edge: usize,
     ) {
         self.list.clear();
         // Sized for the most peaks there can be: no growth from frame to frame.
         let most = 3 * WIDE_PEAKS_PER_EDGE;
-        let per_edge = if self.wide {
-            WIDE_CANDIDATES_PER_EDGE
-        } else {
-            CANDIDATES_PER_EDGE
-        };
         debug_assert!(peaks.len() <= most);
         self.list.reserve(most);
         self.prefix.resize(most * (PROFILE_BINS + 1), 0);
@@ -334,6 +324,7 @@ pub(super) fn line_candidates(
         &[all.clone(), all.clone(), all],
         [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
         [320, 240],
+        CANDIDATES_PER_EDGE,
     );
     c
 }

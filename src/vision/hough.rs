@@ -26,7 +26,8 @@ pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 /// (`candidates::CANDIDATES_PER_EDGE`) lets a shorter line beside long ones (a face
 /// beside the stripes of a patterned sample) still reach the search.
 pub const PEAKS_PER_EDGE: usize = 26;
-/// Peaks kept per edge by a wide search ([`Hough::set_wide`]).
+/// Peaks kept per edge by a wide search, the most [`Hough::find_peaks`] keeps: it lets
+/// a short face beside many long lines reach the search.
 pub const WIDE_PEAKS_PER_EDGE: usize = 40;
 /// Fewest (smoothed, so twice the pixel count) votes for a peak.
 const MIN_VOTES: u16 = 10;
@@ -65,8 +66,6 @@ pub struct Hough {
     pixels: usize,
     /// Per edge, the indices of the points that voted for it (polarity-compatible).
     pub voters: [Vec<u32>; 3],
-    /// Keeps [`WIDE_PEAKS_PER_EDGE`] peaks per edge instead of [`PEAKS_PER_EDGE`].
-    wide: bool,
     /// Scratch of `find_peaks`: which cells of a row are the maximum of their row.
     row_max: Vec<u8>,
 }
@@ -167,28 +166,16 @@ impl Hough {
         }
     }
 
-    /// Keeps [`WIDE_PEAKS_PER_EDGE`] peaks per edge from now on (`wide`), or
-    /// [`PEAKS_PER_EDGE`]: a wide search lets a short face beside many long lines
-    /// reach the search.
-    pub fn set_wide(&mut self, wide: bool) {
-        self.wide = wide;
-    }
-
-    /// Fills `self.peaks` with up to [`PEAKS_PER_EDGE`] best local maxima per edge
-    /// ([`WIDE_PEAKS_PER_EDGE`] in a wide search).
-    pub fn find_peaks(&mut self) {
-        find_peaks(self);
+    /// Fills `self.peaks` with up to `most` best local maxima per edge
+    /// ([`PEAKS_PER_EDGE`], or [`WIDE_PEAKS_PER_EDGE`] in a wide search; at most that).
+    pub fn find_peaks(&mut self, most: usize) {
+        find_peaks(self, most.min(WIDE_PEAKS_PER_EDGE));
     }
 
     /// [`Self::find_peaks`]'s body (see [`find_peaks`]).
     #[inline(always)]
-    fn find_peaks_body(&mut self) {
+    fn find_peaks_body(&mut self, most: usize) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
-        let most = if self.wide {
-            WIDE_PEAKS_PER_EDGE
-        } else {
-            PEAKS_PER_EDGE
-        };
         for row in 0..3 * n_psi {
             let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
             let old = self.smooth_span[row];
@@ -288,7 +275,7 @@ dispatch! {
 
 dispatch! {
     /// [`Hough::find_peaks_body`], with AVX2 when the CPU has it (see `vision::simd`).
-    fn find_peaks(hough: &mut Hough) => Hough::find_peaks_body
+    fn find_peaks(hough: &mut Hough, most: usize) => Hough::find_peaks_body
 }
 
 /// Inserts `peak` into the descending list `peaks[first..]`, keeping at most `most`
@@ -340,7 +327,7 @@ mod tests {
         // The line turned by +7 deg (image angle): normal at 97 deg.
         let pts = line_points(7.0, 0.0, 97.0, 80);
         h.vote(&pts, 1.0);
-        h.find_peaks();
+        h.find_peaks(PEAKS_PER_EDGE);
         let best = h.peaks.iter().find(|p| p.edge == 0).unwrap();
         assert!((best.psi.to_degrees() - 7.0).abs() <= 1.0, "{best:?}");
         assert!(best.votes >= 140, "{best:?}");
@@ -349,7 +336,7 @@ mod tests {
         // Reversed polarity votes for nothing.
         let flipped = line_points(7.0, 0.0, -83.0, 80);
         h.vote(&flipped, 1.0);
-        h.find_peaks();
+        h.find_peaks(PEAKS_PER_EDGE);
         assert!(h.peaks.is_empty(), "{:?}", h.peaks);
     }
 
@@ -383,16 +370,15 @@ mod tests {
             pts.extend(line_points(0.0, -90.0 + 6.0 * f64::from(k), 90.0, 120));
         }
         pts.extend(line_points(0.0, 100.0, 90.0, 25));
-        let short_kept = |wide: bool| {
+        let short_kept = |most: usize| {
             let mut h = Hough::default();
-            h.set_wide(wide);
             h.configure(320, 240, 20f64.to_radians(), normals);
             h.vote(&pts, 1.0);
-            h.find_peaks();
+            h.find_peaks(most);
             let short = h.peaks.iter().find(|p| p.edge == 0 && p.votes < 100);
             short.is_some_and(|p| p.psi.abs() < 0.01 && (p.rho - 200.0).abs() <= 1.0)
         };
-        assert!(!short_kept(false));
-        assert!(short_kept(true));
+        assert!(!short_kept(PEAKS_PER_EDGE));
+        assert!(short_kept(WIDE_PEAKS_PER_EDGE));
     }
 }

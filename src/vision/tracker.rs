@@ -16,11 +16,11 @@ use image::GrayImage;
 
 use super::bands::{bands, bend_prior, refined_pose, visible_segment};
 use super::calibration::{CalibratedEdge, Calibration};
-use super::candidates::Candidates;
+use super::candidates::{Candidates, CANDIDATES_PER_EDGE, WIDE_CANDIDATES_PER_EDGE};
 use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
 use super::edges::EdgeMap;
 use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
-use super::hough::Hough;
+use super::hough::{Hough, PEAKS_PER_EDGE, WIDE_PEAKS_PER_EDGE};
 use super::hypothesis::{Hypothesis, Prior, Search};
 use super::options::{CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig};
 use super::pyramid::Pyramid;
@@ -47,8 +47,8 @@ const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 /// A frame missed on the detection image is searched again binned more coarsely, at
 /// these multiples (numerator, denominator) of the detection image's binning in turn,
 /// until one detects (see [`PyramidTracker::track`]); a multiple that bins no coarser
-/// than the detection image, or as one searched already, is skipped. Each binning averages the noise and breaks
-/// a face into pieces differently: over the nine real-background seeds (5,112 probe
+/// than the detection image (1.5 of a binning of 1) is skipped. Each binning averages
+/// the noise and breaks a face into pieces differently: over the nine real-background seeds (5,112 probe
 /// frames) the three find 5 of the 44 frames that twice as coarse alone misses, all
 /// under noise 30-46 over a bright textured ground; over the noisy sessions of ten
 /// seeds more (101-110, 1,431 probe frames under noise 30-48), 10 of 51; and no decoy
@@ -294,7 +294,7 @@ impl PyramidTracker {
         let template = *self.calibration.template();
         let base = super::pyramid::binning_factor(frame.width());
         let det = self.stages(frame, shared, own, base);
-        self.search_stages(det, &template);
+        self.search_stages(det, &template, false);
         let prior = match (self.coherence, self.last) {
             (true, Some(last)) => Some(Prior {
                 psi: last.psi,
@@ -326,20 +326,13 @@ impl PyramidTracker {
             .into_iter()
             .fold(f64::INFINITY, f64::min);
         if missed && faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise) {
-            for (k, (num, den)) in COARSE_RETRIES.into_iter().enumerate() {
+            for (num, den) in COARSE_RETRIES {
                 let factor = num * base / den;
-                let searched = COARSE_RETRIES[..k]
-                    .iter()
-                    .any(|&(n, d)| n * base / d == factor);
-                if factor <= base || searched {
+                if factor <= base {
                     continue;
                 }
                 let det = self.stages(frame, None, own, factor);
-                self.search_stages(det, &template);
-                if let Some(e) = self
-                    .attempt(frame, det, &template, None)
-                    .filter(|e| e.detected)
-                {
+                if let Some(e) = self.search_again(frame, det, &template, false) {
                     estimate = e;
                     break;
                 }
@@ -352,15 +345,7 @@ impl PyramidTracker {
         // them kept (WIDE_PEAKS_PER_EDGE, WIDE_CANDIDATES_PER_EDGE).
         if !estimate.detected {
             let det = self.stages(frame, shared, own, base);
-            self.hough.set_wide(true);
-            self.cands.set_wide(true);
-            self.search_stages(det, &template);
-            let wide = self
-                .attempt(frame, det, &template, None)
-                .filter(|e| e.detected);
-            self.hough.set_wide(false);
-            self.cands.set_wide(false);
-            if let Some(e) = wide {
+            if let Some(e) = self.search_again(frame, det, &template, true) {
                 estimate = e;
             }
         }
@@ -420,21 +405,42 @@ impl PyramidTracker {
         own
     }
 
-    /// The search's stages on `det`: Hough votes, peaks and line candidates.
-    fn search_stages(&mut self, det: &Detection, template: &Template) {
+    /// The search's stages on `det`: Hough votes, peaks and line candidates (more of
+    /// both per edge in a `wide` search).
+    fn search_stages(&mut self, det: &Detection, template: &Template, wide: bool) {
+        let (peaks, lines) = if wide {
+            (WIDE_PEAKS_PER_EDGE, WIDE_CANDIDATES_PER_EDGE)
+        } else {
+            (PEAKS_PER_EDGE, CANDIDATES_PER_EDGE)
+        };
         let (w, h) = (det.pyr.width, det.pyr.height);
         self.factor = det.pyr.factor;
         self.hough
             .configure(w, h, self.window_rad, template.gradient_angles());
         self.hough.vote(&det.edges.points, det.edges.noise);
-        self.hough.find_peaks();
+        self.hough.find_peaks(peaks);
         self.cands.build(
             &self.hough.peaks,
             &det.edges.points,
             &self.hough.voters,
             template.gradient_angles(),
             [w, h],
+            lines,
         );
+    }
+
+    /// A missed frame searched again on `det` (`wide`: see [`Self::search_stages`]):
+    /// its estimate if that search detects the tip.
+    fn search_again(
+        &mut self,
+        frame: &GrayImage,
+        det: &Detection,
+        template: &Template,
+        wide: bool,
+    ) -> Option<Estimate> {
+        self.search_stages(det, template, wide);
+        self.attempt(frame, det, template, None)
+            .filter(|e| e.detected)
     }
 
     /// One search (restricted by `prior` if given) and its verification.
