@@ -1419,6 +1419,14 @@ const SHORT_OVERHANG_STATIONS: usize = STATIONS / 2;
 const END_RUN_PX: usize = 3;
 /// Rows of the beam's band averaged at each position of the end face's search.
 const END_ROWS: usize = 6;
+/// How deep below the beam edge, in beam thicknesses, the end face's line is followed
+/// past the block's corner, each depth judged alone. A beam thicker by a factor f
+/// moves the apex as well, and with it the scale: its end face reaches
+/// f (T + H) / (f T + H) beam thicknesses at that scale (T the beam's thickness, H the
+/// tip's height), 1.5-1.75 for a beam twice as thick under a tip 2-6 times taller than
+/// it, which shows along the first half of the full second thickness but not along
+/// 70 % of it.
+const END_FACE_DEPTHS: [f64; 2] = [2.0, 1.5];
 /// Longest search for the end face, pixels either way (the samples live on the stack).
 const END_SEARCH_MAX: usize = 120;
 
@@ -1429,10 +1437,11 @@ const END_SEARCH_MAX: usize = 120;
 /// it ([`locate_end`]), a thicker beam shows twice: the overhang's lower face, from
 /// where the front face's line meets it to the free end, steps on fewer than
 /// [`OVERHANG_SHOWN`] stations (the beam lies on both sides of it), and the end face's
-/// step carries on below the corner, over the next beam thickness, on [`HELD_SHARE`]
-/// of its stations. Refused as `Miss::ScaleMismatch` when both hold: a particle at
-/// the probe's level at the free end hides the overhang and steps beside the end
-/// face's line, but not along that much of it. An overhang too short to check
+/// step carries on below the corner, over the next beam thickness or its first half
+/// ([`END_FACE_DEPTHS`]), on [`HELD_SHARE`] of its stations (those a particle brighter
+/// than the beam covers beside it not counted). Refused as `Miss::ScaleMismatch` when
+/// both hold: a particle at the probe's level at the free end hides the overhang and
+/// steps beside the end face's line, but not along that much of it. An overhang too short to check
 /// leaves the end face alone to tell, on the stations whose samples on the beam's
 /// side lie clear of the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free
 /// end itself is not refused when its step is missing: a bright textured background
@@ -1495,35 +1504,48 @@ fn free_end(
     // short overhang the front face runs along that line: the samples on the beam's
     // side are taken only clear of the front face's predicted line.
     let face = Line::through(end, [-out[0], -out[1]]);
-    let (a, b) = (beam_px + s.margin_px + 2.0, 2.0 * beam_px);
     let size = [frame.width() as f64, frame.height() as f64];
     let (c0, c1) = clip_inside(end, red.normal, size, sampling.reach() + 1.0)?;
-    let (a0, b0) = (a.max(c0), b.min(c1));
-    if b0 - a0 < MIN_CHECKED_PX {
-        return None;
-    }
     let front = t.line(pose, GREEN);
     let clear_of_front = Line {
         normal: scale(front.normal, -1.0),
         rho: -front.rho,
     };
-    let q = profile(
-        frame,
-        &face,
-        (
-            add(end, scale(red.normal, a0)),
-            add(end, scale(red.normal, b0)),
-        ),
-        short.then_some(&clear_of_front),
-        &sampling,
-        red_step,
-    );
     let judged = if short {
         SHORT_OVERHANG_STATIONS
     } else {
         STATIONS
     };
-    (q.stations >= judged && shown(&q) as f64 >= HELD_SHARE * q.stations as f64)
+    let runs_on = |depth: f64| {
+        let (a0, b0) = (
+            (beam_px + s.margin_px + 2.0).max(c0),
+            (depth * beam_px).min(c1),
+        );
+        if b0 - a0 < MIN_CHECKED_PX {
+            return false;
+        }
+        let q = profile(
+            frame,
+            &face,
+            (
+                add(end, scale(red.normal, a0)),
+                add(end, scale(red.normal, b0)),
+            ),
+            short.then_some(&clear_of_front),
+            &sampling,
+            red_step,
+        );
+        // A station whose far side a particle brighter than the beam covers, while
+        // its beam side keeps the beam's level, says nothing either way.
+        let level = q.held_level();
+        let counted = (0..q.stations).filter(|&k| !q.covered(k, level)).count();
+        q.stations >= judged
+            && counted >= SHORT_OVERHANG_STATIONS
+            && shown(&q) as f64 >= HELD_SHARE * counted as f64
+    };
+    END_FACE_DEPTHS
+        .into_iter()
+        .any(runs_on)
         .then_some(Miss::ScaleMismatch)
 }
 
@@ -1839,6 +1861,44 @@ mod tests {
         };
         assert_eq!(free_end_of(&t), None);
         assert_eq!(free_end_of(&thicker), Some(Miss::ScaleMismatch));
+    }
+
+    #[test]
+    fn a_beam_thicker_by_less_than_its_thickness_shows_below_the_corner() {
+        // The toy pyramid under a beam 1.6 times as thick as calibrated (the apex and
+        // the scale where calibration puts them): its end face runs on below the corner
+        // over 0.6 of the next thickness, short of 70 % of it but over all of its first
+        // half. A disc brighter than the beam beside the end face there covers some of
+        // those stations without hiding the rest.
+        let t = toy_under_beam();
+        let pose = Pose {
+            psi: 0.1,
+            scale: 4.0,
+            apex: [150.0, 260.0],
+        };
+        let red = t.line(&pose, RED);
+        let s = Sampling::new(1.0, t.beam_px.unwrap() * pose.scale);
+        let thicker = Template {
+            beam_px: Some(16.0),
+            ..t
+        };
+        let (free, far) = t.segment(&pose, RED);
+        let out = scale(sub(free, far), 1.0 / norm(sub(free, far)));
+        // Beside the end face's line, 1.3 thicknesses below the beam edge.
+        let centre = add(add(free, scale(out, 5.0)), scale(red.normal, 1.45 * 40.0));
+        let free_end_of = |drawn: &Template, disc: bool| {
+            let mut frame = probe_frame(drawn, &pose, 0.0, true);
+            for (x, y, px) in frame.enumerate_pixels_mut() {
+                if disc && norm(sub([f64::from(x), f64::from(y)], centre)) <= 4.0 {
+                    px.0 = [250];
+                }
+            }
+            free_end(&frame, &t, &pose, &red, &s, 150.0)
+        };
+        assert_eq!(free_end_of(&t, false), None);
+        assert_eq!(free_end_of(&t, true), None);
+        assert_eq!(free_end_of(&thicker, false), Some(Miss::ScaleMismatch));
+        assert_eq!(free_end_of(&thicker, true), Some(Miss::ScaleMismatch));
     }
 
     #[test]
