@@ -1439,7 +1439,8 @@ const END_SEARCH_MAX: usize = 120;
 /// [`OVERHANG_SHOWN`] stations (the beam lies on both sides of it), and the end face's
 /// step carries on below the corner, over the next beam thickness or its first half
 /// ([`END_FACE_DEPTHS`]), on [`HELD_SHARE`] of its stations (those a particle brighter
-/// than the beam covers beside it not counted). Refused as `Miss::ScaleMismatch` when
+/// than the beam covers beside it not counted; at least [`SHORT_OVERHANG_STATIONS`]
+/// counted). Refused as `Miss::ScaleMismatch` when
 /// both hold: a particle at the probe's level at the free end hides the overhang and
 /// steps beside the end face's line, but not along that much of it. An overhang too short to check
 /// leaves the end face alone to tell, on the stations whose samples on the beam's
@@ -1877,15 +1878,19 @@ mod tests {
             apex: [150.0, 260.0],
         };
         let red = t.line(&pose, RED);
-        let s = Sampling::new(1.0, t.beam_px.unwrap() * pose.scale);
+        let beam_px = t.beam_px.unwrap() * pose.scale;
+        let s = Sampling::new(1.0, beam_px);
         let thicker = Template {
             beam_px: Some(16.0),
             ..t
         };
         let (free, far) = t.segment(&pose, RED);
         let out = scale(sub(free, far), 1.0 / norm(sub(free, far)));
-        // Beside the end face's line, 1.3 thicknesses below the beam edge.
-        let centre = add(add(free, scale(out, 5.0)), scale(red.normal, 1.45 * 40.0));
+        // Beside the end face's line, 5 px out, 1.45 thicknesses below the beam edge.
+        let centre = add(
+            add(free, scale(out, 5.0)),
+            scale(red.normal, 1.45 * beam_px),
+        );
         let free_end_of = |drawn: &Template, disc: bool| {
             let mut frame = probe_frame(drawn, &pose, 0.0, true);
             for (x, y, px) in frame.enumerate_pixels_mut() {

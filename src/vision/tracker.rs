@@ -48,11 +48,11 @@ const WINDOW_SLACK_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 /// these multiples (numerator, denominator) of the detection image's binning in turn,
 /// until one detects (see [`PyramidTracker::track`]); a multiple that bins no coarser
 /// than the detection image (1.5 of a binning of 1) is skipped. Each binning averages
-/// the noise and breaks a face into pieces differently: over the nine real-background seeds (5,112 probe
-/// frames) the three find 5 of the 44 frames that twice as coarse alone misses, all
-/// under noise 30-46 over a bright textured ground; over the noisy sessions of ten
-/// seeds more (101-110, 1,431 probe frames under noise 30-48), 10 of 51; and no decoy
-/// of the seven adversarial seeds.
+/// the noise and breaks a face into pieces differently: over the nine real-background
+/// seeds (5,112 probe frames) the three find 5 of the 44 frames that twice as coarse
+/// alone misses, all under noise 30-46 over a bright textured ground; over the noisy
+/// sessions of ten seeds more (101-110, 1,431 probe frames under noise 30-48), 10 of
+/// 51; and no decoy of the seven adversarial seeds.
 const COARSE_RETRIES: [(u32, u32); 3] = [(2, 1), (3, 2), (3, 1)];
 /// ... when the faintest calibrated edge's contrast is below this many gradient noises
 /// of the frame's detection image. Over real backgrounds the frames with noise 30-48
