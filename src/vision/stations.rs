@@ -18,8 +18,10 @@
 //! It steps the wrong way
 //! (`Miss::WrongAppearance`) when its median ratio is negative; a face whose last two
 //! stations toward its base show nothing is longer than the probe's at this scale, or
-//! runs on where the probe's does not (`Miss::ScaleMismatch`); and the probe's side of
-//! every edge is one body, of one level. The beam edge is checked with its free end in
+//! runs on where the probe's does not; with no beam edge found to fix the scale, one
+//! face ending by its base while the other runs on past its own is not this pyramid
+//! at any scale (`Miss::ScaleMismatch`); and the probe's side of every edge is one
+//! body, of one level. The beam edge is checked with its free end in
 //! view, along its rigid block. When the fit left it out (a tip placed from its faces,
 //! the scale known to a few per cent) it is looked for parallel to where the pose puts
 //! it, within that slack, and must be found along its length as a face is (not
@@ -578,6 +580,26 @@ pub fn check_edges(
     if let Some(miss) = face_ends(ends) {
         return Some(miss);
     }
+    // Without the beam edge to fix the scale, a face ending by its base beside one
+    // whose step runs on well past its own base is not this pyramid at any scale.
+    if beam_edge.is_none() {
+        for (i, other) in [(0, GREEN), (1, BLUE)] {
+            let ended = ends[i].is_some_and(|f| f <= 1.0 + END_SLACK);
+            if ended
+                && face_runs_on(
+                    frame,
+                    t,
+                    pose,
+                    other,
+                    &s,
+                    calibrated[other],
+                    shown_step[other],
+                )
+            {
+                return Some(Miss::ScaleMismatch);
+            }
+        }
+    }
     // A face ending at its base pins the scale and with it the beam edge's depth: the
     // beam edge must then show on the part of its slack in view.
     if let Some(miss) = red_unseen {
@@ -1020,12 +1042,12 @@ fn turned_face(
     }
     let len = norm(sub(b, a));
     let best = locate_steps(frame, line, (a, b), s, predicted.step);
-    let located_ratio = LOCATED_RATIO * shown_by_partner.clamp(END_SHOWN_MIN, 1.0);
+    let shows_from = located_ratio(shown_by_partner);
     // (position along the face, offset of the located step), pixels.
     let mut located = [[0.0; 2]; STATIONS];
     let mut n = 0;
     for (i, &(r, k)) in best.iter().enumerate() {
-        if r >= located_ratio {
+        if r >= shows_from {
             located[n] = [(i as f64 + 0.5) / STATIONS as f64 * len, k];
             n += 1;
         }
@@ -1107,19 +1129,43 @@ fn face_end(
     step: f64,
     shown: f64,
 ) -> Option<f64> {
+    let j = located_end(&end_profile(frame, t, pose, e, s, step), shown)?;
+    Some(1.0 - END_SPAN + 2.0 * END_SPAN * j)
+}
+
+/// Whether face `e`'s step runs on over the whole stretch [`face_end`] reads (to
+/// [`END_SPAN`] past its predicted base), all its stations in view and at most
+/// [`END_AGAINST`] of them without the step.
+fn face_runs_on(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    s: &Sampling,
+    step: f64,
+    shown: f64,
+) -> bool {
+    let p = end_profile(frame, t, pose, e, s, step);
+    let located = located_ratio(shown);
+    let showing = (0..p.stations).filter(|&k| p.ratio[k] >= located).count();
+    p.stations == STATIONS && showing + END_AGAINST >= STATIONS
+}
+
+/// The stations of face `e` over its end, [`END_SPAN`] of its predicted length either
+/// side of its predicted base.
+fn end_profile(
+    frame: &GrayImage,
+    t: &Template,
+    pose: &Pose,
+    e: usize,
+    s: &Sampling,
+    step: f64,
+) -> Profile {
     let (tip, base) = t.segment(pose, e);
-    let line = t.line(pose, e);
     let d = sub(base, tip);
     let at = |f: f64| add(tip, scale(d, f));
-    let j = step_end(
-        frame,
-        &line,
-        (at(1.0 - END_SPAN), at(1.0 + END_SPAN)),
-        s,
-        step,
-        shown,
-    )?;
-    Some(1.0 - END_SPAN + 2.0 * END_SPAN * j)
+    let span = (at(1.0 - END_SPAN), at(1.0 + END_SPAN));
+    profile(frame, &t.line(pose, e), span, None, s, step)
 }
 
 /// How far past its base, as a share of its length, a face's step is followed on the
@@ -1180,30 +1226,24 @@ pub fn face_runs_past_base(
     last / len
 }
 
-/// Where a step along `line` from `span.0` to `span.1` stops showing, as a share of
-/// that span: the split of its stations that best explains them, showing the step
-/// before (at [`LOCATED_RATIO`] of `shown`, taken between [`END_SHOWN_MIN`] and 1, of
-/// the calibrated `step`) and not after, with at most [`END_AGAINST`] station against
-/// it. `None` when not all stations are in view, or the step shows on all of them or
-/// on none.
-fn step_end(
-    frame: &GrayImage,
-    line: &Line,
-    span: Span,
-    s: &Sampling,
-    step: f64,
-    shown: f64,
-) -> Option<f64> {
-    located_end(&profile(frame, line, span, None, s, step), shown)
-}
-
-/// Where profile `p`'s step stops showing, as a share of its span ([`step_end`]).
+/// Where profile `p`'s step stops showing, as a share of its span: the split of its
+/// stations that best explains them, showing the step before (from
+/// [`located_ratio`] of `shown`) and not after, with at most [`END_AGAINST`] station
+/// against it. `None` when not all stations are in view, or the step shows on all of
+/// them or on none.
 fn located_end(p: &Profile, shown: f64) -> Option<f64> {
     if p.stations < STATIONS {
         return None;
     }
-    let located = LOCATED_RATIO * shown.clamp(END_SHOWN_MIN, 1.0);
+    let located = located_ratio(shown);
     split(|k| p.ratio[k] >= located)
+}
+
+/// The ratio from which a station shows a face that shows `shown` of its calibrated
+/// step along its length: [`LOCATED_RATIO`] of it, taken between [`END_SHOWN_MIN`]
+/// and 1.
+fn located_ratio(shown: f64) -> f64 {
+    LOCATED_RATIO * shown.clamp(END_SHOWN_MIN, 1.0)
 }
 
 /// The split of the stations that best explains which `shows`: all before it, none
@@ -1743,6 +1783,44 @@ mod tests {
         // Faces running on past their bases do not pin the scale: a beam edge beyond
         // the border is allowed.
         assert_eq!(check(&frame(false, true)), None);
+    }
+
+    #[test]
+    fn faces_disagreeing_on_the_scale_without_the_beam_edge_are_refused() {
+        // The probe of the test above, 15 px lower, without its beam: the pyramid
+        // drawn to 0.85 of its faces' length, and a strip inside the front face
+        // running on past its base to the border (a pyramid of another shape, or a
+        // mirrored one). The beam edge's slack reaches out of the frame.
+        let t = Template {
+            beam_px: Some(50.0 - 50.0 * 60f64.to_radians().sin()),
+            ..super::super::template::toy()
+        };
+        let pose = Pose {
+            psi: 0.45,
+            scale: 2.0,
+            apex: [280.0, 130.0],
+        };
+        let lines = [RED, BLUE, GREEN].map(|e| t.line(&pose, e));
+        let at_apex = lines[RED].depth(pose.apex);
+        let at_base = lines[RED].depth(t.segment(&pose, BLUE).1);
+        let cut = at_apex + 0.85 * (at_base - at_apex);
+        let frame = |strip_px: f64, whole: bool| {
+            GrayImage::from_fn(400, 300, |x, y| {
+                let p = [f64::from(x), f64::from(y)];
+                let (back, front) = (lines[BLUE].depth(p), lines[GREEN].depth(p));
+                let faces = back >= 0.0 && front >= 0.0;
+                let pyramid = faces && (whole || lines[RED].depth(p) >= cut);
+                let strip = faces && front <= strip_px;
+                image::Luma([if pyramid || strip { 200 } else { 50 }])
+            })
+        };
+        let check =
+            |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [false, true, true]);
+        assert_eq!(check(&frame(12.0, false)), Some(Miss::ScaleMismatch));
+        // Both faces ending short agree with each other (and are refused for it);
+        // both running on to the border leave the scale free.
+        assert_eq!(check(&frame(0.0, false)), Some(Miss::ScaleMismatch));
+        assert_eq!(check(&frame(0.0, true)), None);
     }
 
     #[test]
