@@ -15,15 +15,16 @@
 //! corner to a particle beside it while the apex shows the surroundings beyond it),
 //! or when a face's line steps on past the apex from the level of its far side: the
 //! border of a patch over the tip, meeting a face where the apex should be.
-//! It steps the wrong way
-//! (`Miss::WrongAppearance`) when its median ratio is negative; a face whose last two
-//! stations toward its base show nothing is longer than the probe's at this scale, or
-//! runs on where the probe's does not; with no beam edge found to fix the scale, one
-//! face ending by its base while the other runs on past its own is not this pyramid
-//! at any scale (`Miss::ScaleMismatch`); and the probe's side of every edge is one
-//! body, of one level. The beam edge is checked with its free end in
-//! view, along its rigid block. When the fit left it out (a tip placed from its faces,
-//! the scale known to a few per cent) it is looked for parallel to where the pose puts
+//! It steps the wrong way (`Miss::WrongAppearance`) when its median ratio is negative.
+//! The pyramid is not this probe's size at the placed scale (`Miss::ScaleMismatch`)
+//! when a face's last three stations toward its base show nothing (the face is
+//! shorter; unless the beam edge in the fit measures the scale and those stations keep
+//! the probe's level on its side: something at that level beside the base), or, with
+//! no beam edge found to fix the scale, one face ends by its base while the other runs
+//! on past its own. The probe's side of every edge is one body, of one level. The
+//! beam edge is checked with its free end in view, along its rigid block. When the
+//! fit left it out (a tip placed from its faces, the scale known to a few per cent)
+//! it is looked for parallel to where the pose puts
 //! it, within that slack, and must be found along its length as a face is (not
 //! necessarily at its corner, where a faint beam fades first), unless the slack
 //! reaches out of the frame: a mirrored probe's faces make a wedge, but its beam runs
@@ -157,6 +158,14 @@ impl Profile {
     /// `level`.
     fn inside_within(&self, k: usize, level: f64, share: f64) -> bool {
         (self.inside[k] - level).abs() <= share * self.step.abs()
+    }
+
+    /// Whether the [`FAR_MISSING`] stations at the far end keep, on the probe's side,
+    /// the probe's level along the rest of the edge.
+    fn far_end_inside_probe(&self) -> bool {
+        let probe_level = self.held_level();
+        let n = self.stations;
+        (n.saturating_sub(FAR_MISSING)..n).all(|k| self.at_probe_level(k, probe_level))
     }
 
     /// Whether the stations at the corner end show the edge, with the probe on its
@@ -533,7 +542,14 @@ pub fn check_edges(
         }
         p.corner_in_view = corner;
         if let Some(miss) = p.refusal(Edge::ALL[e]) {
-            return Some(miss);
+            // With the beam edge in the fit the scale is measured: a face whose last
+            // stations lose their step to something at the probe's level beside its
+            // base, its inside keeping that level, is judged with its partner's end
+            // (`face_ends`), the beam's lower face and its free end, not alone.
+            let beside_base = miss == Miss::ScaleMismatch && p.far_end_inside_probe();
+            if !(beside_base && fitted[RED]) {
+                return Some(miss);
+            }
         }
         shown_step[e] = p.step_ratio();
         if e != RED && corner {
@@ -1862,6 +1878,36 @@ mod tests {
         }
         assert_eq!(check(&touching), None);
         assert_eq!(check(&over), Some(Miss::EdgeMissing(Edge::Blue.into())));
+    }
+
+    #[test]
+    fn a_face_losing_its_base_to_a_body_at_its_level_keeps_a_measured_scale() {
+        // The toy pyramid pointing down under its beam, and a disc at the probe's
+        // level beside the front face's last stretch: the face's last stations show
+        // no step, their inside at the probe's level. With the beam edge in the fit,
+        // its scale stands; without it, the face is shorter than the placed scale's.
+        let t = toy_under_beam();
+        let pose = Pose {
+            psi: 0.0,
+            scale: 2.5,
+            apex: [220.0, 250.0],
+        };
+        let (tip, base) = t.segment(&pose, GREEN);
+        let len = norm(sub(base, tip));
+        let up = scale(sub(base, tip), 1.0 / len);
+        let out = scale(t.line(&pose, GREEN).normal, -1.0);
+        // A disc over about the last third of the face, its centre outside.
+        let (along, r) = (0.85 * len, 0.2 * len);
+        let centre = add(add(pose.apex, scale(up, along)), scale(out, 0.5 * r));
+        let mut frame = probe_frame(&t, &pose, 0.0, true);
+        for (x, y, px) in frame.enumerate_pixels_mut() {
+            if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
+                px.0 = [200];
+            }
+        }
+        let check = |fitted| check_edges(&frame, &t, &pose, 1.0, &[150.0; 3], fitted);
+        assert_eq!(check([true; 3]), None);
+        assert_eq!(check([false, true, true]), Some(Miss::ScaleMismatch));
     }
 
     #[test]
