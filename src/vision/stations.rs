@@ -24,11 +24,10 @@
 //! on past its own. The probe's side of every edge is one body, of one level. The
 //! beam edge is checked with its free end in view, along its rigid block. When the
 //! fit left it out (a tip placed from its faces, the scale known to a few per cent)
-//! it is looked for parallel to where the pose puts
-//! it, within that slack, and must be found along its length as a face is (not
-//! necessarily at its corner, where a faint beam fades first), unless the slack
-//! reaches out of the frame: a mirrored probe's faces make a wedge, but its beam runs
-//! the other way.
+//! it is looked for parallel to where the pose puts it, within that slack, and must be
+//! found along its length as a face is (not necessarily at its corner, where a faint
+//! beam fades first), unless the slack reaches out of the frame: a mirrored probe's
+//! faces make a wedge, but its beam runs the other way.
 
 use image::GrayImage;
 
