@@ -590,26 +590,20 @@ pub fn check_edges(
     if hi - lo > INSIDE_SPREAD * calibrated[RED].abs() {
         return Some(Miss::WrongAppearance(Edge::Red.into()));
     }
-    // Where each face's step ends, measured over its whole end in view.
-    let ends = [BLUE, GREEN].map(|e| face_end(frame, t, pose, e, &s, calibrated[e], shown_step[e]));
+    // Where each face's step ends (back face first), measured over its whole end in
+    // view.
+    let end_profiles = [BLUE, GREEN].map(|e| end_profile(frame, t, pose, e, &s, calibrated[e]));
+    let shown_faces = [shown_step[BLUE], shown_step[GREEN]];
+    let ends = [0, 1].map(|i| face_end(&end_profiles[i], shown_faces[i]));
     if let Some(miss) = face_ends(ends) {
         return Some(miss);
     }
     // Without the beam edge to fix the scale, a face ending by its base beside one
     // whose step runs on well past its own base is not this pyramid at any scale.
     if beam_edge.is_none() {
-        for (i, other) in [(0, GREEN), (1, BLUE)] {
-            let ended = ends[i].is_some_and(|f| f <= 1.0 + END_SLACK);
-            if ended
-                && face_runs_on(
-                    frame,
-                    t,
-                    pose,
-                    other,
-                    &s,
-                    calibrated[other],
-                    shown_step[other],
-                )
+        for (ended, other) in [(0, 1), (1, 0)] {
+            if ends[ended].is_some_and(|f| f <= 1.0 + END_SLACK)
+                && runs_throughout(&end_profiles[other], shown_faces[other])
             {
                 return Some(Miss::ScaleMismatch);
             }
@@ -1131,39 +1125,13 @@ const END_SLACK: f64 = 0.1;
 /// own step, not of the calibrated one.
 const END_SHOWN_MIN: f64 = 0.3;
 
-/// Where face `e`'s step ends along its predicted line, as a share of its predicted
-/// length (1 at the predicted base), the face showing `shown` of its calibrated step
-/// `step` along its length ([`END_SHOWN_MIN`]); `None` when its stations are not all
-/// in view.
-fn face_end(
-    frame: &GrayImage,
-    t: &Template,
-    pose: &Pose,
-    e: usize,
-    s: &Sampling,
-    step: f64,
-    shown: f64,
-) -> Option<f64> {
-    let j = located_end(&end_profile(frame, t, pose, e, s, step), shown)?;
+/// Where a face's step ends along its predicted line, as a share of its predicted
+/// length (1 at the predicted base), from its stations over its end (`end`,
+/// [`end_profile`]), the face showing `shown` of its calibrated step along its length
+/// ([`END_SHOWN_MIN`]); `None` when its stations are not all in view.
+fn face_end(end: &Profile, shown: f64) -> Option<f64> {
+    let j = located_end(end, shown)?;
     Some(1.0 - END_SPAN + 2.0 * END_SPAN * j)
-}
-
-/// Whether face `e`'s step runs on over the whole stretch [`face_end`] reads (to
-/// [`END_SPAN`] past its predicted base), all its stations in view and at most
-/// [`END_AGAINST`] of them without the step.
-fn face_runs_on(
-    frame: &GrayImage,
-    t: &Template,
-    pose: &Pose,
-    e: usize,
-    s: &Sampling,
-    step: f64,
-    shown: f64,
-) -> bool {
-    let p = end_profile(frame, t, pose, e, s, step);
-    let located = located_ratio(shown);
-    let showing = (0..p.stations).filter(|&k| p.ratio[k] >= located).count();
-    p.stations == STATIONS && showing + END_AGAINST >= STATIONS
 }
 
 /// The stations of face `e` over its end, [`END_SPAN`] of its predicted length either
@@ -1252,6 +1220,16 @@ fn located_end(p: &Profile, shown: f64) -> Option<f64> {
     }
     let located = located_ratio(shown);
     split(|k| p.ratio[k] >= located)
+}
+
+/// Whether profile `p`'s step runs on over its whole span (its stations all in view,
+/// at most [`END_AGAINST`] of them without the step, from [`located_ratio`] of
+/// `shown`): where it does over a face's end ([`end_profile`]), the face runs on past
+/// its predicted base.
+fn runs_throughout(p: &Profile, shown: f64) -> bool {
+    let located = located_ratio(shown);
+    let showing = (0..p.stations).filter(|&k| p.ratio[k] >= located).count();
+    p.stations == STATIONS && showing + END_AGAINST >= STATIONS
 }
 
 /// The ratio from which a station shows a face that shows `shown` of its calibrated
@@ -1759,12 +1737,11 @@ mod tests {
         assert_eq!(beam_edge_scale(&bare, &t, &truth, 1.0, 150.0), None);
     }
 
-    #[test]
-    fn a_face_ending_at_its_base_demands_the_beam_edge_in_view() {
-        // The toy pyramid's faces meeting the beam's lower face at their bases (50
-        // reference pixels from the apex, 60 deg from the beam). The beam edge slants
-        // across the top border, so its slack reaches out of the frame; the front
-        // face's base and the stretch past it are in view.
+    /// The toy pyramid with its faces meeting the beam's lower face at their bases (50
+    /// reference pixels from the apex, 60 deg from the beam), turned 0.45 rad at
+    /// scale 2 with its apex at `apex`: in a 400 x 300 frame, the beam edge slants
+    /// across the top border.
+    fn toy_slanted(apex: [f64; 2]) -> (Template, Pose) {
         let t = Template {
             beam_px: Some(50.0 - 50.0 * 60f64.to_radians().sin()),
             ..super::super::template::toy()
@@ -1772,8 +1749,16 @@ mod tests {
         let pose = Pose {
             psi: 0.45,
             scale: 2.0,
-            apex: [280.0, 115.0],
+            apex,
         };
+        (t, pose)
+    }
+
+    #[test]
+    fn a_face_ending_at_its_base_demands_the_beam_edge_in_view() {
+        // The slanted toy probe: the beam edge's slack reaches out of the frame; the
+        // front face's base and the stretch past it are in view.
+        let (t, pose) = toy_slanted([280.0, 115.0]);
         let lines = [RED, BLUE, GREEN].map(|e| t.line(&pose, e));
         let thick = t.beam_px.unwrap() * pose.scale;
         // The pyramid up to the beam's lower face, and the beam if `beam`; or a
@@ -1802,19 +1787,11 @@ mod tests {
 
     #[test]
     fn faces_disagreeing_on_the_scale_without_the_beam_edge_are_refused() {
-        // The probe of the test above, 15 px lower, without its beam: the pyramid
-        // drawn to 0.85 of its faces' length, and a strip inside the front face
-        // running on past its base to the border (a pyramid of another shape, or a
-        // mirrored one). The beam edge's slack reaches out of the frame.
-        let t = Template {
-            beam_px: Some(50.0 - 50.0 * 60f64.to_radians().sin()),
-            ..super::super::template::toy()
-        };
-        let pose = Pose {
-            psi: 0.45,
-            scale: 2.0,
-            apex: [280.0, 130.0],
-        };
+        // The slanted toy probe without its beam: the pyramid drawn to 0.85 of its
+        // faces' length, and a strip inside the front face running on past its base
+        // to the border (a pyramid of another shape, or a mirrored one). The beam
+        // edge's slack reaches out of the frame.
+        let (t, pose) = toy_slanted([280.0, 130.0]);
         let lines = [RED, BLUE, GREEN].map(|e| t.line(&pose, e));
         let at_apex = lines[RED].depth(pose.apex);
         let at_base = lines[RED].depth(t.segment(&pose, BLUE).1);
@@ -1838,30 +1815,41 @@ mod tests {
         assert_eq!(check(&frame(0.0, true)), None);
     }
 
-    #[test]
-    fn a_face_hidden_at_the_apex_is_a_particle_only_while_the_apex_shows() {
-        // The toy pyramid pointing down (apex angle 60 deg) under its beam, and a disc
-        // at the probe's level beside its back face: touching the face near the apex
-        // (the apex clear), or over the apex and the face's first stretch.
-        let t = toy_under_beam();
+    /// The toy pyramid pointing down (apex angle 60 deg) under its beam, at scale 2.5
+    /// with its apex at (220, 250).
+    fn toy_down() -> (Template, Pose) {
         let pose = Pose {
             psi: 0.0,
             scale: 2.5,
             apex: [220.0, 250.0],
         };
-        let (tip, base) = t.segment(&pose, BLUE);
+        (toy_under_beam(), pose)
+    }
+
+    /// [`toy_down`]'s frame with a disc of radius `r` at the probe's level, its centre
+    /// `along` pixels from the apex on face `e`'s line and `off` pixels outside it.
+    fn disc_beside_face(e: usize, along: f64, off: f64, r: f64) -> GrayImage {
+        let (t, pose) = toy_down();
+        let (tip, base) = t.segment(&pose, e);
         let up = scale(sub(base, tip), 1.0 / norm(sub(base, tip)));
-        let out = scale(t.line(&pose, BLUE).normal, -1.0);
-        let with_disc = |along: f64, off: f64, r: f64| {
-            let centre = add(add(pose.apex, scale(up, along)), scale(out, off));
-            let mut frame = probe_frame(&t, &pose, 0.0, true);
-            for (x, y, px) in frame.enumerate_pixels_mut() {
-                if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
-                    px.0 = [200];
-                }
+        let out = scale(t.line(&pose, e).normal, -1.0);
+        let centre = add(add(pose.apex, scale(up, along)), scale(out, off));
+        let mut frame = probe_frame(&t, &pose, 0.0, true);
+        for (x, y, px) in frame.enumerate_pixels_mut() {
+            if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
+                px.0 = [200];
             }
-            frame
-        };
+        }
+        frame
+    }
+
+    #[test]
+    fn a_face_hidden_at_the_apex_is_a_particle_only_while_the_apex_shows() {
+        // The toy pyramid pointing down, and a disc at the probe's level beside its
+        // back face: touching the face near the apex (the apex clear), or over the
+        // apex and the face's first stretch.
+        let (t, pose) = toy_down();
+        let with_disc = |along, off, r| disc_beside_face(BLUE, along, off, r);
         let s = Sampling::new(1.0, t.beam_px.unwrap() * pose.scale);
         let corner_held = |frame: &GrayImage, e: usize| {
             let partner = t.line(&pose, if e == BLUE { GREEN } else { BLUE });
@@ -1881,29 +1869,15 @@ mod tests {
 
     #[test]
     fn a_face_losing_its_base_to_a_body_at_its_level_keeps_a_measured_scale() {
-        // The toy pyramid pointing down under its beam, and a disc at the probe's
-        // level beside the front face's last stretch: the face's last stations show
-        // no step, their inside at the probe's level. With the beam edge in the fit,
-        // its scale stands; without it, the face is shorter than the placed scale's.
-        let t = toy_under_beam();
-        let pose = Pose {
-            psi: 0.0,
-            scale: 2.5,
-            apex: [220.0, 250.0],
-        };
+        // The toy pyramid pointing down, and a disc at the probe's level over about
+        // the last third of its front face, its centre outside: the face's last
+        // stations show no step, their inside at the probe's level. With the beam edge
+        // in the fit, its scale stands; without it, the face is shorter than the placed
+        // scale's.
+        let (t, pose) = toy_down();
         let (tip, base) = t.segment(&pose, GREEN);
         let len = norm(sub(base, tip));
-        let up = scale(sub(base, tip), 1.0 / len);
-        let out = scale(t.line(&pose, GREEN).normal, -1.0);
-        // A disc over about the last third of the face, its centre outside.
-        let (along, r) = (0.85 * len, 0.2 * len);
-        let centre = add(add(pose.apex, scale(up, along)), scale(out, 0.5 * r));
-        let mut frame = probe_frame(&t, &pose, 0.0, true);
-        for (x, y, px) in frame.enumerate_pixels_mut() {
-            if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
-                px.0 = [200];
-            }
-        }
+        let frame = disc_beside_face(GREEN, 0.85 * len, 0.1 * len, 0.2 * len);
         let check = |fitted| check_edges(&frame, &t, &pose, 1.0, &[150.0; 3], fitted);
         assert_eq!(check([true; 3]), None);
         assert_eq!(check([false, true, true]), Some(Miss::ScaleMismatch));
