@@ -1473,13 +1473,13 @@ const END_SEARCH_MAX: usize = 120;
 /// step carries on below the corner, over the next beam thickness or its first half
 /// ([`END_FACE_DEPTHS`]), on [`HELD_SHARE`] of its stations (those a particle brighter
 /// than the beam covers beside it not counted; at least [`SHORT_OVERHANG_STATIONS`]
-/// counted). Refused as `Miss::ScaleMismatch` when
-/// both hold: a particle at the probe's level at the free end hides the overhang and
-/// steps beside the end face's line, but not along that much of it. An overhang too short to check
-/// leaves the end face alone to tell, on the stations whose samples on the beam's
-/// side lie clear of the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free
-/// end itself is not refused when its step is missing: a bright textured background
-/// beyond it takes the step away as often as a beam running on.
+/// counted). Refused as `Miss::ScaleMismatch` when both hold: a particle at the
+/// probe's level at the free end hides the overhang and steps beside the end face's
+/// line, but not along that much of it. An overhang too short to check leaves the end
+/// face alone to tell, on the stations whose samples on the beam's side lie clear of
+/// the front face (at least [`SHORT_OVERHANG_STATIONS`]). The free end itself is not
+/// refused when its step is missing: a bright textured background beyond it takes
+/// the step away as often as a beam running on.
 fn free_end(
     frame: &GrayImage,
     t: &Template,
@@ -1826,6 +1826,15 @@ mod tests {
         (toy_under_beam(), pose)
     }
 
+    /// Paints a disc of radius `r` at grey `level` centred on `centre` into `frame`.
+    fn paint_disc(frame: &mut GrayImage, centre: [f64; 2], r: f64, level: u8) {
+        for (x, y, px) in frame.enumerate_pixels_mut() {
+            if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
+                px.0 = [level];
+            }
+        }
+    }
+
     /// [`toy_down`]'s frame with a disc of radius `r` at the probe's level, its centre
     /// `along` pixels from the apex on face `e`'s line and `off` pixels outside it.
     fn disc_beside_face(e: usize, along: f64, off: f64, r: f64) -> GrayImage {
@@ -1835,11 +1844,7 @@ mod tests {
         let out = scale(t.line(&pose, e).normal, -1.0);
         let centre = add(add(pose.apex, scale(up, along)), scale(out, off));
         let mut frame = probe_frame(&t, &pose, 0.0, true);
-        for (x, y, px) in frame.enumerate_pixels_mut() {
-            if norm(sub([f64::from(x), f64::from(y)], centre)) <= r {
-                px.0 = [200];
-            }
-        }
+        paint_disc(&mut frame, centre, r, 200);
         frame
     }
 
@@ -1990,10 +1995,8 @@ mod tests {
         );
         let free_end_of = |drawn: &Template, disc: bool| {
             let mut frame = probe_frame(drawn, &pose, 0.0, true);
-            for (x, y, px) in frame.enumerate_pixels_mut() {
-                if disc && norm(sub([f64::from(x), f64::from(y)], centre)) <= 4.0 {
-                    px.0 = [250];
-                }
+            if disc {
+                paint_disc(&mut frame, centre, 4.0, 250);
             }
             free_end(&frame, &t, &pose, &red, &s, 150.0)
         };
