@@ -85,6 +85,10 @@ const IN_VIEW_SHARE: f64 = 0.25;
 const BEYOND_PX: [f64; 3] = [4.0, 8.0, 12.0];
 /// Floor of the residuals' scale in the Huber weights, pixels.
 const MIN_SCALE_PX: f64 = 0.2;
+/// A fit whose rotation's standard error exceeds this, degrees, is refused
+/// (`low-confidence`): its edges do not agree on the rotation to the accuracy
+/// detections are held to (docs/tracker.md, "Accuracy": at most 0.3 deg off).
+const MAX_SIGMA_DEG: f64 = 0.3;
 /// Huber's constant, in units of the residuals' robust scale.
 const HUBER_K: f64 = 1.5;
 /// Ratio of the measured rotation error to the fit's covariance: neighbouring
@@ -597,6 +601,8 @@ impl Fitter {
                 Some(Miss::ApexOutside)
             } else if pose.psi.abs() > window_rad + 2.0 * sigma {
                 Some(Miss::RotationOutside)
+            } else if sigma > MAX_SIGMA_DEG.to_radians() {
+                Some(Miss::LowConfidence)
             } else {
                 None
             }
@@ -849,6 +855,21 @@ mod tests {
             refusal(&mut fitter(&t, &pose, false), &t, pose, &frame),
             Some(Miss::ScaleUnseen)
         );
+    }
+
+    /// Every edge holding, but the fit's rotation known to no better than the
+    /// accuracy detections are held to: refused as `low-confidence`.
+    #[test]
+    fn a_fit_whose_rotation_is_not_pinned_down_is_refused() {
+        let (t, pose, frame) = needle_at_rest();
+        let at_sigma = |deg: f64| {
+            let f = &mut fitter(&t, &pose, true);
+            f.verify(&frame, &t, pose, f64::to_radians(deg), 0.3)
+                .err()
+                .map(|r| r.0)
+        };
+        assert_eq!(at_sigma(0.9 * MAX_SIGMA_DEG), None);
+        assert_eq!(at_sigma(1.1 * MAX_SIGMA_DEG), Some(Miss::LowConfidence));
     }
 
     /// A particle brighter than a bright probe lying across part of its lower flank:
