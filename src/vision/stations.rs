@@ -19,9 +19,10 @@
 //! The pyramid is not this probe's size at the placed scale (`Miss::ScaleMismatch`)
 //! when a face's last three stations toward its base show nothing (the face is
 //! shorter; unless the beam edge in the fit measures the scale and those stations keep
-//! the probe's level on its side: something at that level beside the base), or, with
-//! no beam edge found to fix the scale, one face ends by its base while the other runs
-//! on past its own. The probe's side of every edge is one body, of one level. The
+//! the probe's level on its side: something at that level beside the base), when both
+//! faces end off their predicted bases on one side (a face lost over its whole end
+//! ends before it), or, with no beam edge found to fix the scale, one face ends by its
+//! base while the other runs on past its own. The probe's side of every edge is one body, of one level. The
 //! beam edge is checked with its free end in view, along its rigid block. When the
 //! fit left it out (a tip placed from its faces, the scale known to a few per cent)
 //! it is looked for parallel to where the pose puts it, within that slack, and must be
@@ -595,7 +596,10 @@ pub fn check_edges(
     let end_profiles = [BLUE, GREEN].map(|e| end_profile(frame, t, pose, e, &s, calibrated[e]));
     let shown_faces = [shown_step[BLUE], shown_step[GREEN]];
     let ends = [0, 1].map(|i| face_end(&end_profiles[i], shown_faces[i]));
-    if let Some(miss) = face_ends(ends) {
+    // A face lost over its whole end (one whose lost base is judged with its
+    // partner, above) is judged by where it ends at the latest.
+    let latest = [0, 1].map(|i| latest_end(&end_profiles[i], shown_faces[i]));
+    if let Some(miss) = face_ends(latest) {
         return Some(miss);
     }
     // Without the beam edge to fix the scale, a face ending by its base beside one
@@ -1230,6 +1234,22 @@ fn runs_throughout(p: &Profile, shown: f64) -> bool {
     let located = located_ratio(shown);
     let showing = (0..p.stations).filter(|&k| p.ratio[k] >= located).count();
     p.stations == STATIONS && showing + END_AGAINST >= STATIONS
+}
+
+/// Where a face ends, as [`face_end`] has it, or at the latest, where its step is
+/// absent over its whole end ([`absent_throughout`]): before its end's first station.
+fn latest_end(end: &Profile, shown: f64) -> Option<f64> {
+    face_end(end, shown).or_else(|| absent_throughout(end, shown).then_some(1.0 - END_SPAN))
+}
+
+/// Whether profile `p`'s step is absent over its whole span: its stations all in
+/// view, at most [`END_AGAINST`] of them stepping by half of [`located_ratio`] of
+/// `shown` or more. A station shows the face from that ratio and lacks it below half
+/// of it, so a faint face's stations about the ratio are neither.
+fn absent_throughout(p: &Profile, shown: f64) -> bool {
+    let absent = 0.5 * located_ratio(shown);
+    let stepping = (0..p.stations).filter(|&k| p.ratio[k] >= absent).count();
+    p.stations == STATIONS && stepping <= END_AGAINST
 }
 
 /// The ratio from which a station shows a face that shows `shown` of its calibrated
@@ -2116,6 +2136,33 @@ mod tests {
             p.ratio[k] = corner_ratio;
         }
         p
+    }
+
+    #[test]
+    fn a_face_lost_over_its_whole_end_ends_before_it() {
+        // Stations over a face's end (`end_profile`): the step to the base, absent
+        // past it; absent throughout; and a faint face (showing half its calibrated
+        // step) whose stations hover about the ratio that locates it.
+        let end = |ratio: [f64; STATIONS]| Profile {
+            ratio,
+            ..face_profile(210.0, 1.0)
+        };
+        let at_base = end([1.0, 1.0, 0.9, 1.0, 1.0, 0.1, 0.0, -0.1, 0.0, 0.1]);
+        let absent = end([0.1, 0.0, -0.1, 0.1, 0.0, 0.1, 0.0, 0.0, -0.5, -1.0]);
+        let faint = end([0.03, 0.28, 0.32, 0.17, 0.2, 0.04, -0.04, 0.06, -0.1, -0.3]);
+        assert_eq!(latest_end(&at_base, 1.0), face_end(&at_base, 1.0));
+        assert_eq!(latest_end(&absent, 1.0), Some(1.0 - END_SPAN));
+        assert_eq!(latest_end(&faint, 0.6), None);
+        // Its partner ending short as well: both faces short, another scale.
+        let short = Some(0.82);
+        assert_eq!(
+            face_ends([short, latest_end(&absent, 1.0)]),
+            Some(Miss::ScaleMismatch)
+        );
+        assert_eq!(
+            face_ends([latest_end(&at_base, 1.0), latest_end(&absent, 1.0)]),
+            None
+        );
     }
 
     #[test]
