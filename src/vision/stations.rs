@@ -22,13 +22,13 @@
 //! the probe's level on its side: something at that level beside the base), when both
 //! faces end off their predicted bases on one side (a face lost over its whole end
 //! ends before it), or, with no beam edge found to fix the scale, one face ends by its
-//! base while the other runs on past its own. The probe's side of every edge is one body, of one level. The
-//! beam edge is checked with its free end in view, along its rigid block. When the
-//! fit left it out (a tip placed from its faces, the scale known to a few per cent)
-//! it is looked for parallel to where the pose puts it, within that slack, and must be
-//! found along its length as a face is (not necessarily at its corner, where a faint
-//! beam fades first), unless the slack reaches out of the frame: a mirrored probe's
-//! faces make a wedge, but its beam runs the other way.
+//! base while the other runs on past its own. The probe's side of every edge is one
+//! body, of one level. The beam edge is checked with its free end in view, along its
+//! rigid block. When the fit left it out (a tip placed from its faces, the scale known
+//! to a few per cent) it is looked for parallel to where the pose puts it, within that
+//! slack, and must be found along its length as a face is (not necessarily at its
+//! corner, where a faint beam fades first), unless the slack reaches out of the frame:
+//! a mirrored probe's faces make a wedge, but its beam runs the other way.
 
 use image::GrayImage;
 
@@ -2141,8 +2141,8 @@ mod tests {
     #[test]
     fn a_face_lost_over_its_whole_end_ends_before_it() {
         // Stations over a face's end (`end_profile`): the step to the base, absent
-        // past it; absent throughout; and a faint face (showing half its calibrated
-        // step) whose stations hover about the ratio that locates it.
+        // past it; absent throughout; and a faint face (showing 0.6 of its
+        // calibrated step) whose stations hover about the ratio that locates it.
         let end = |ratio: [f64; STATIONS]| Profile {
             ratio,
             ..face_profile(210.0, 1.0)
