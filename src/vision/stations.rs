@@ -163,9 +163,15 @@ impl Profile {
     /// Whether the [`FAR_MISSING`] stations at the far end keep, on the probe's side,
     /// the probe's level along the rest of the edge.
     fn far_end_inside_probe(&self) -> bool {
-        let probe_level = self.held_level();
         let n = self.stations;
-        (n.saturating_sub(FAR_MISSING)..n).all(|k| self.at_probe_level(k, probe_level))
+        self.inside_probe_over(n.saturating_sub(FAR_MISSING)..n)
+    }
+
+    /// Whether every station of `stations` keeps, on the probe's side, the probe's
+    /// level along the rest of the edge ([`COVERED_LEVEL`]).
+    fn inside_probe_over(&self, mut stations: std::ops::Range<usize>) -> bool {
+        let probe_level = self.held_level();
+        stations.all(|k| self.at_probe_level(k, probe_level))
     }
 
     /// Whether the stations at the corner end show the edge, with the probe on its
@@ -186,8 +192,7 @@ impl Profile {
     /// the rest of the edge (a bright substrate or particle outside it, not a patch
     /// over the tip).
     pub fn corner_inside_probe(&self) -> bool {
-        let probe_level = self.held_level();
-        (0..END_STATIONS).all(|k| self.at_probe_level(k, probe_level))
+        self.inside_probe_over(0..END_STATIONS)
     }
 
     /// Median level on the far side of the edge over the stations that show it (at
@@ -598,7 +603,7 @@ pub fn check_edges(
     let ends = [0, 1].map(|i| face_end(&end_profiles[i], shown_faces[i]));
     // A face lost over its whole end (one whose lost base is judged with its
     // partner, above) is judged by where it ends at the latest.
-    let latest = [0, 1].map(|i| latest_end(&end_profiles[i], shown_faces[i]));
+    let latest = [0, 1].map(|i| ends[i].or_else(|| lost_end(&end_profiles[i], shown_faces[i])));
     if let Some(miss) = face_ends(latest) {
         return Some(miss);
     }
@@ -1231,15 +1236,14 @@ fn located_end(p: &Profile, shown: f64) -> Option<f64> {
 /// `shown`): where it does over a face's end ([`end_profile`]), the face runs on past
 /// its predicted base.
 fn runs_throughout(p: &Profile, shown: f64) -> bool {
-    let located = located_ratio(shown);
-    let showing = (0..p.stations).filter(|&k| p.ratio[k] >= located).count();
-    p.stations == STATIONS && showing + END_AGAINST >= STATIONS
+    p.stations == STATIONS && stepping(p, located_ratio(shown)) + END_AGAINST >= STATIONS
 }
 
-/// Where a face ends, as [`face_end`] has it, or at the latest, where its step is
-/// absent over its whole end ([`absent_throughout`]): before its end's first station.
-fn latest_end(end: &Profile, shown: f64) -> Option<f64> {
-    face_end(end, shown).or_else(|| absent_throughout(end, shown).then_some(1.0 - END_SPAN))
+/// Where a face ends at the latest when its step is absent over its whole end
+/// ([`absent_throughout`] on its stations over it, `end`): before the first of them.
+/// `None` when it is not.
+fn lost_end(end: &Profile, shown: f64) -> Option<f64> {
+    absent_throughout(end, shown).then_some(1.0 - END_SPAN)
 }
 
 /// Whether profile `p`'s step is absent over its whole span: its stations all in
@@ -1247,9 +1251,12 @@ fn latest_end(end: &Profile, shown: f64) -> Option<f64> {
 /// `shown` or more. A station shows the face from that ratio and lacks it below half
 /// of it, so a faint face's stations about the ratio are neither.
 fn absent_throughout(p: &Profile, shown: f64) -> bool {
-    let absent = 0.5 * located_ratio(shown);
-    let stepping = (0..p.stations).filter(|&k| p.ratio[k] >= absent).count();
-    p.stations == STATIONS && stepping <= END_AGAINST
+    p.stations == STATIONS && stepping(p, 0.5 * located_ratio(shown)) <= END_AGAINST
+}
+
+/// How many of profile `p`'s stations step by `ratio` or more.
+fn stepping(p: &Profile, ratio: f64) -> usize {
+    (0..p.stations).filter(|&k| p.ratio[k] >= ratio).count()
 }
 
 /// The ratio from which a station shows a face that shows `shown` of its calibrated
@@ -2150,17 +2157,17 @@ mod tests {
         let at_base = end([1.0, 1.0, 0.9, 1.0, 1.0, 0.1, 0.0, -0.1, 0.0, 0.1]);
         let absent = end([0.1, 0.0, -0.1, 0.1, 0.0, 0.1, 0.0, 0.0, -0.5, -1.0]);
         let faint = end([0.03, 0.28, 0.32, 0.17, 0.2, 0.04, -0.04, 0.06, -0.1, -0.3]);
-        assert_eq!(latest_end(&at_base, 1.0), face_end(&at_base, 1.0));
-        assert_eq!(latest_end(&absent, 1.0), Some(1.0 - END_SPAN));
-        assert_eq!(latest_end(&faint, 0.6), None);
+        assert_eq!(lost_end(&at_base, 1.0), None);
+        assert_eq!(lost_end(&absent, 1.0), Some(1.0 - END_SPAN));
+        assert_eq!(lost_end(&faint, 0.6), None);
         // Its partner ending short as well: both faces short, another scale.
         let short = Some(0.82);
         assert_eq!(
-            face_ends([short, latest_end(&absent, 1.0)]),
+            face_ends([short, lost_end(&absent, 1.0)]),
             Some(Miss::ScaleMismatch)
         );
         assert_eq!(
-            face_ends([latest_end(&at_base, 1.0), latest_end(&absent, 1.0)]),
+            face_ends([face_end(&at_base, 1.0), lost_end(&absent, 1.0)]),
             None
         );
     }
