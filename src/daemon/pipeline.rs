@@ -188,13 +188,15 @@ pub fn run_tracker(
         let started_s = clock.now_s();
         estimator.estimate(&frame.image, &mut estimates);
         let published_s = clock.now_s();
+        // The capture time as the frame recording holds it, so a replay reproduces it.
+        let frame_time_s = clock.to_whole_ns(frame.meta.captured_s);
         seq += 1;
         for (k, (slot, &estimate)) in published.iter_mut().zip(&estimates).enumerate() {
             *slot = Published {
                 probe: k,
                 seq,
                 frame_sequence: frame.meta.sequence,
-                frame_time_s: frame.meta.captured_s,
+                frame_time_s,
                 published_s,
                 estimate,
             };

@@ -30,6 +30,12 @@ impl Clock {
     pub fn monotonic_ns_at(&self, seconds: f64) -> u64 {
         (self.epoch_ns as i128 + (seconds * 1e9).round() as i128).max(0) as u64
     }
+
+    /// `seconds` held to the whole nanosecond a recording stores it as: what a replay
+    /// of the recorded frame reads back, to the last bit.
+    pub fn to_whole_ns(&self, seconds: f64) -> f64 {
+        self.seconds_at(self.monotonic_ns_at(seconds))
+    }
 }
 
 /// CLOCK_MONOTONIC in nanoseconds.

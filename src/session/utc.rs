@@ -88,6 +88,21 @@ pub fn civil_from_days(days: i64) -> (i64, i64, i64) {
 mod tests {
     use super::*;
 
+    /// A capture time half a nanosecond off a printed microsecond's boundary prints
+    /// alike once held to whole nanoseconds: live, and read back from the recording.
+    #[test]
+    fn a_time_held_to_whole_nanoseconds_reads_back_to_the_bit() {
+        let clock = Clock::start();
+        let anchor = UtcAnchor::measure(&clock);
+        for t in [0.057_136_499_6, 0.057_136_500_4, 12.345_678_5, 1.0 / 3.0] {
+            let held = clock.to_whole_ns(t);
+            let read_back = anchor.seconds_at(clock.monotonic_ns_at(t));
+            assert_eq!(held.to_bits(), read_back.to_bits(), "{t}");
+            assert_eq!(format!("{held:.6}"), format!("{read_back:.6}"));
+            assert!((held - t).abs() <= 0.5e-9, "{t} -> {held}");
+        }
+    }
+
     #[test]
     fn formats_utc_with_microseconds() {
         assert_eq!(format_utc_ns(0), "1970-01-01T00:00:00.000000Z");
