@@ -216,25 +216,11 @@ fn calibrates_either_polarity_at_low_contrast() {
     // Faces 5 to 16 grey levels above or below a bright background (180).
     for (k, contrast) in [5.0, 8.0, 16.0, -5.0, -8.0, -16.0].into_iter().enumerate() {
         let session = bright_background_session(900 + k as u64, contrast, 0);
-        let (_, truth) = scene::render(&session.reference);
-        let truth = truth.edges.expect("the reference shows the probe");
-        let (_, cal) = rendered::calibrate_over(&session, &crops);
-        for (edge, seg) in Edge::ALL
-            .into_iter()
-            .zip([truth.red, truth.blue, truth.green])
-        {
+        let (cal, errors) = reference_read(&session, &crops);
+        for (edge, err) in Edge::ALL.into_iter().zip(errors) {
             let e = cal.edge(edge);
             assert_eq!(e.polarity, contrast.signum(), "{contrast}: {edge}");
             assert_eq!(e.contrast.signum(), contrast.signum(), "{contrast}: {edge}");
-            let d = [seg.to[0] - seg.from[0], seg.to[1] - seg.from[1]];
-            let mut want = -d[1].atan2(d[0]).to_degrees();
-            while want > 90.0 {
-                want -= 180.0;
-            }
-            while want <= -90.0 {
-                want += 180.0;
-            }
-            let err = (e.orientation_deg - want + 90.0).rem_euclid(180.0) - 90.0;
             // At 5 levels over noise 3 a face is measured to a few tenths of a degree,
             // and calibrate says so: the error lies within its reported sigma's reach.
             let sigma = e.orientation_sigma_deg;
@@ -245,6 +231,74 @@ fn calibrates_either_polarity_at_low_contrast() {
             );
         }
     }
+}
+
+/// `session`'s calibration on its reference rendered over `crops`, and how far off
+/// each edge's orientation it read is (red, blue, green), degrees.
+fn reference_read(session: &scene::Session, crops: &[image::GrayImage]) -> (Calibration, [f64; 3]) {
+    let (_, truth) = scene::render(&session.reference);
+    let truth = truth.edges.expect("the reference shows the probe");
+    let (_, cal) = rendered::calibrate_over(session, crops);
+    let errors = [
+        (Edge::Red, truth.red),
+        (Edge::Blue, truth.blue),
+        (Edge::Green, truth.green),
+    ]
+    .map(|(edge, seg)| {
+        let d = [seg.to[0] - seg.from[0], seg.to[1] - seg.from[1]];
+        let want = -d[1].atan2(d[0]).to_degrees();
+        (cal.edge(edge).orientation_deg - want + 90.0).rem_euclid(180.0) - 90.0
+    });
+    (cal, errors)
+}
+
+#[test]
+#[ignore = "a measurement for docs/tracker.md: cargo test --release --test tracker_realbg -- --ignored --nocapture"]
+fn the_reference_sets_each_session_s_bias() {
+    // Per session: how far off the reference's edges were read, and the mean error of
+    // the session's detections (all tracked on that reading). A reference edge read
+    // turned moves every frame's angle the other way.
+    let crops = rendered::real_crops();
+    let seed = suite_seed(71);
+    let sessions = scene::real_suite(seed, 12, 50, crops.len());
+    let (truths, estimates) = rendered::run_all_over(&sessions, &crops);
+    let (mut read, mut bias) = (Vec::new(), Vec::new());
+    for (i, session) in sessions.iter().enumerate() {
+        let (_, errors) = reference_read(session, &crops);
+        let frame_errors: Vec<f64> = truths[i * 50..(i + 1) * 50]
+            .iter()
+            .zip(&estimates[i * 50..(i + 1) * 50])
+            .filter(|(t, e)| t.detected && e.detected)
+            .map(|(t, e)| e.angle_deg.unwrap() - t.angle_deg)
+            .collect();
+        let mean = frame_errors.iter().sum::<f64>() / frame_errors.len() as f64;
+        let edges = errors.iter().sum::<f64>() / 3.0;
+        println!(
+            "session {i:2}: reference edges read {:+.3} {:+.3} {:+.3} deg off (mean {edges:+.4}); \
+             its {} detections' mean error {mean:+.4} deg",
+            errors[0],
+            errors[1],
+            errors[2],
+            frame_errors.len()
+        );
+        read.push(edges);
+        bias.push(mean);
+    }
+    let n = read.len() as f64;
+    let (mr, mb) = (read.iter().sum::<f64>() / n, bias.iter().sum::<f64>() / n);
+    let sxy: f64 = read
+        .iter()
+        .zip(&bias)
+        .map(|(r, b)| (r - mr) * (b - mb))
+        .sum();
+    let sxx: f64 = read.iter().map(|r| (r - mr).powi(2)).sum();
+    let syy: f64 = bias.iter().map(|b| (b - mb).powi(2)).sum();
+    println!(
+        "seed {seed}: correlation of a session's mean error with its reference's mean edge \
+         error {:.2}, slope {:.2}",
+        sxy / (sxx * syy).sqrt(),
+        sxy / sxx
+    );
 }
 
 #[test]
