@@ -252,15 +252,22 @@ fn reference_read(session: &scene::Session, crops: &[image::GrayImage]) -> (Cali
     (cal, errors)
 }
 
+/// The crops, seed and sessions the measurements for docs/tracker.md run on: the
+/// suite of `SUITE_SEED`, held-out seed 71 by default.
+fn measured_suite() -> (Vec<image::GrayImage>, u64, Vec<scene::Session>) {
+    let crops = rendered::real_crops();
+    let seed = suite_seed(71);
+    let sessions = scene::real_suite(seed, 12, 50, crops.len());
+    (crops, seed, sessions)
+}
+
 #[test]
 #[ignore = "a measurement for docs/tracker.md: cargo test --release --test tracker_realbg -- --ignored --nocapture"]
 fn the_reference_sets_each_session_s_bias() {
     // Per session: how far off the reference's edges were read, and the mean error of
     // the session's detections (all tracked on that reading). A reference edge read
     // turned moves every frame's angle the other way.
-    let crops = rendered::real_crops();
-    let seed = suite_seed(71);
-    let sessions = scene::real_suite(seed, 12, 50, crops.len());
+    let (crops, seed, sessions) = measured_suite();
     let (truths, estimates) = rendered::run_all_over(&sessions, &crops);
     let (mut read, mut bias) = (Vec::new(), Vec::new());
     for (i, session) in sessions.iter().enumerate() {
@@ -327,9 +334,7 @@ fn the_tracker_noise_sets_the_p95() {
     // their mean error its bias. The p95 an estimator with that noise and no bias would
     // reach is the x where the frames' mean P(|N(0, spread)| > x) is 5 % (the median's:
     // 50 %).
-    let crops = rendered::real_crops();
-    let seed = suite_seed(71);
-    let sessions = scene::real_suite(seed, 12, 50, crops.len());
+    let (crops, seed, sessions) = measured_suite();
     // (noise sigma of the frame, spread, bias), degrees.
     let mut frames: Vec<(f64, f64, f64)> = Vec::new();
     for s in &sessions {
