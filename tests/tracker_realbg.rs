@@ -270,11 +270,12 @@ fn the_reference_sets_each_session_s_bias() {
     let (crops, seed, sessions) = measured_suite();
     let (truths, estimates) = rendered::run_all_over(&sessions, &crops);
     let (mut read, mut bias) = (Vec::new(), Vec::new());
-    for (i, session) in sessions.iter().enumerate() {
+    let per_session = truths.chunks(50).zip(estimates.chunks(50));
+    for (i, (session, (ts, es))) in sessions.iter().zip(per_session).enumerate() {
         let (_, errors) = reference_read(session, &crops);
-        let frame_errors: Vec<f64> = truths[i * 50..(i + 1) * 50]
+        let frame_errors: Vec<f64> = ts
             .iter()
-            .zip(&estimates[i * 50..(i + 1) * 50])
+            .zip(es)
             .filter(|(t, e)| t.detected && e.detected)
             .map(|(t, e)| e.angle_deg.unwrap() - t.angle_deg)
             .collect();
