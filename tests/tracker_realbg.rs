@@ -266,10 +266,13 @@ fn measured_suite() -> (Vec<image::GrayImage>, u64, Vec<scene::Session>) {
 fn the_reference_sets_each_session_s_bias() {
     // Per session: how far off the reference's edges were read, and the mean error of
     // the session's detections (all tracked on that reading). A reference edge read
-    // turned moves every frame's angle the other way.
+    // turned moves every frame's angle the other way. Then the suite's median and p95
+    // with each session's mean error taken out: the most any per-session correction
+    // of the reference's reading could give.
     let (crops, seed, sessions) = measured_suite();
     let (truths, estimates) = rendered::run_all_over(&sessions, &crops);
     let (mut read, mut bias) = (Vec::new(), Vec::new());
+    let (mut as_tracked, mut unbiased) = (Vec::new(), Vec::new());
     let per_session = truths.chunks(50).zip(estimates.chunks(50));
     for (i, (session, (ts, es))) in sessions.iter().zip(per_session).enumerate() {
         let (_, errors) = reference_read(session, &crops);
@@ -280,6 +283,8 @@ fn the_reference_sets_each_session_s_bias() {
             .map(|(t, e)| e.angle_deg.unwrap() - t.angle_deg)
             .collect();
         let mean = frame_errors.iter().sum::<f64>() / frame_errors.len() as f64;
+        as_tracked.extend(frame_errors.iter().map(|e| e.abs()));
+        unbiased.extend(frame_errors.iter().map(|e| (e - mean).abs()));
         let edges = errors.iter().sum::<f64>() / 3.0;
         println!(
             "session {i:2}: reference edges read {:+.3} {:+.3} {:+.3} deg off (mean {edges:+.4}); \
@@ -306,6 +311,16 @@ fn the_reference_sets_each_session_s_bias() {
          error {:.2}, slope {:.2}",
         sxy / (sxx * syy).sqrt(),
         sxy / sxx
+    );
+    let quantiles = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        (at(0.5), at(0.95))
+    };
+    let ((m0, p0), (m1, p1)) = (quantiles(&mut as_tracked), quantiles(&mut unbiased));
+    println!(
+        "seed {seed}: angle error median {m0:.4}, p95 {p0:.4} deg; with each session's mean \
+         error taken out, median {m1:.4}, p95 {p1:.4} deg"
     );
 }
 
