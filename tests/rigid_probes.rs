@@ -11,7 +11,10 @@
 //! (`tracker.scale_range`, see `scales`).
 //!
 //! `TOOL_SEED` picks another suite (the committed bounds hold on the default seed; a
-//! held-out seed is the check that they are not tuned to it).
+//! held-out seed is the check that they are not tuned to it). For looking into a
+//! miss: `RIGID_DEBUG=1` prints each session's template and each missed or tail frame,
+//! and `ONLY_FRAME=k` tracks frame `k` of each session alone and writes it to
+//! `target/tmp/rigid-frames/<reference seed>_<k>.png`.
 
 mod tracker_support;
 
@@ -105,8 +108,9 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
     if std::env::var("RIGID_DEBUG").is_ok() {
         let t = &template;
         println!(
-            "session {} {}x{} style {} probe {:.0} bg {:.0} noise {:.1} real {} needle {} edges {:?}",
+            "session {} seed {} {}x{} style {} probe {:.0} bg {:.0} noise {:.1} real {} needle {} edges {:?}",
             session.kind.name(),
+            session.reference.seed,
             session.reference.width,
             session.reference.height,
             session.reference.look.style_name,
@@ -131,9 +135,12 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
         }
         let truth = render_tool_into(spec, crops, &mut frame);
         if only.is_some() {
+            let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rigid-frames");
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join(format!("{}_{k}.png", session.reference.seed));
             frame
-                .save(format!("/tmp/rigid_{}_{k}.png", session.reference.seed))
-                .unwrap();
+                .save(&path)
+                .unwrap_or_else(|err| panic!("{}: {err}", path.display()));
         }
         let e: Estimate = tracker.track(&frame);
         if !truth.in_view {
