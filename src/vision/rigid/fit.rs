@@ -626,6 +626,14 @@ impl Fitter {
     /// and deep), the frame lies less than [`COVERED_APEX_SHARE`] of the way from the
     /// surroundings' level to the probe's. A patch over the tip leaves the probe's
     /// level past the apex; a body that only looks like the probe has no inside there.
+    ///
+    /// A particle beyond the probe's level (brighter than a bright probe, darker than
+    /// a dark one) touching the tip is the other case: past the apex the frame lies
+    /// beyond the probe's level by more than [`COVERED_LEVEL`] of the step, and its
+    /// blur reaches into the corner, so there the corner stations' inside may lie at
+    /// the probe's level or beyond it. A patch at the probe's level over the tip
+    /// still reads as the probe past the apex, and a patch beyond it over the tip
+    /// hides both apex edges' corners, which is refused before this is asked.
     fn particle_beside_tip(
         &self,
         frame: &GrayImage,
@@ -663,6 +671,10 @@ impl Fitter {
         };
         let edge = &t.edges[hidden];
         let inside = normal(hidden);
+        // Levels as shares of the way from the surroundings' level to the probe's.
+        let share = |v: f64| (v - around) / (probe - around);
+        let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out).map(share);
+        let beyond = past.is_some_and(|r| r > 1.0 + COVERED_LEVEL);
         let carries_on = self
             .corner_stations(t, hidden)
             .into_iter()
@@ -670,10 +682,10 @@ impl Fitter {
             .all(|p| {
                 let at = add(pose.place(edge, p.tau), scale(inside, LEVEL_NEAR));
                 level(at, inside)
-                    .is_some_and(|v| (v - probe).abs() <= COVERED_LEVEL * (probe - around).abs())
+                    .map(share)
+                    .is_some_and(|r| (r - 1.0).abs() <= COVERED_LEVEL || (beyond && r >= 1.0))
             });
-        let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out);
-        carries_on && past.is_some_and(|v| (v - around) / (probe - around) < COVERED_APEX_SHARE)
+        carries_on && past.is_some_and(|r| r < COVERED_APEX_SHARE || beyond)
     }
 
     /// Whether station `p` of `edge` lies under a body beyond the probe's level (brighter
@@ -870,6 +882,50 @@ mod tests {
         };
         assert_eq!(at_sigma(0.9 * MAX_SIGMA_DEG), None);
         assert_eq!(at_sigma(1.1 * MAX_SIGMA_DEG), Some(Miss::LowConfidence));
+    }
+
+    /// A particle brighter than the probe touching its tip, beside the end face's
+    /// corner: past the apex the frame lies beyond the probe's level, and the
+    /// particle's blur lifts the corner above it, so the end face's corner is hidden
+    /// by a particle, not missing. The same disc at the probe's level is not such a
+    /// particle: past the apex it reads as the probe carrying on, as a patch over the
+    /// tip does.
+    #[test]
+    fn a_particle_brighter_than_the_probe_beside_the_tip_does_not_hide_it() {
+        let (t, pose, _) = needle_at_rest();
+        let mut f = fitter(&t, &pose, true);
+        // The end face's stations from 3 px on (the nearest station's run lies
+        // inside the face, as a frame's stations do).
+        for (k, p) in f.points.iter_mut().filter(|p| p.edge == 1).enumerate() {
+            p.tau = 3.0 + k as f64;
+            p.at = pose.place(&t.edges[1], p.tau);
+        }
+        // Background 60, the needle (x up to the apex at 250, y 100-112) at 180, and
+        // beside its corner (up and right of it) a disc of radius 7 at `disc`, whose
+        // blur lifts the levels within 13 px of it by 40.
+        let frame = |disc: u8| {
+            let centre = [257.0, 93.0];
+            GrayImage::from_fn(320, 240, |x, y| {
+                let (x, y) = (f64::from(x), f64::from(y));
+                let d = (x - centre[0]).hypot(y - centre[1]);
+                let body = (50.0..=250.0).contains(&x) && (100.0..=112.0).contains(&y);
+                let level = if d <= 7.0 {
+                    disc
+                } else if body {
+                    180
+                } else {
+                    60
+                };
+                let halo = if disc > 180 && d > 7.0 && d <= 20.0 {
+                    40
+                } else {
+                    0
+                };
+                image::Luma([level.saturating_add(halo)])
+            })
+        };
+        assert!(f.particle_beside_tip(&frame(250), &t, &pose, 1));
+        assert!(!f.particle_beside_tip(&frame(180), &t, &pose, 1));
     }
 
     /// A particle brighter than a bright probe lying across part of its lower flank:
