@@ -121,7 +121,7 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
             session.reference.look.needle.is_some(),
             t.edges
                 .iter()
-                .map(|e| format!("{} off {:.1} ext {:.1}..{:.1} {:?} pol {} step {:.1}", e.name, e.offset, e.extent[0], e.extent[1], e.open, e.polarity, e.step))
+                .map(|e| format!("{} dir {:.2} len {:.1} off {:.1} ext {:.1}..{:.1} {:?} pol {} step {:.1}", e.name, e.normal[1].atan2(e.normal[0]).to_degrees(), e.extent[1] - e.extent[0], e.offset, e.extent[0], e.extent[1], e.open, e.polarity, e.step))
                 .collect::<Vec<_>>()
         );
     }
