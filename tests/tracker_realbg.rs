@@ -7,7 +7,7 @@ mod tracker_support;
 
 use nanoforce::scene;
 use nanoforce::vision::{Calibration, Edge, VisionError};
-use tracker_support::{rendered, score, table};
+use tracker_support::{percentile, rendered, score, table};
 
 /// The suite seed from `SUITE_SEED`, else `default`.
 fn suite_seed(default: u64) -> u64 {
@@ -312,12 +312,8 @@ fn the_reference_sets_each_session_s_bias() {
         sxy / (sxx * syy).sqrt(),
         sxy / sxx
     );
-    let quantiles = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-        (at(0.5), at(0.95))
-    };
-    let ((m0, p0), (m1, p1)) = (quantiles(&mut as_tracked), quantiles(&mut unbiased));
+    let quantiles = |v: &[f64]| (percentile(v, 50.0), percentile(v, 95.0));
+    let ((m0, p0), (m1, p1)) = (quantiles(&as_tracked), quantiles(&unbiased));
     println!(
         "seed {seed}: angle error median {m0:.4}, p95 {p0:.4} deg; with each session's mean \
          error taken out, median {m1:.4}, p95 {p1:.4} deg"

@@ -635,31 +635,24 @@ impl Fitter {
     /// another direction than the probe's, which the stations near the fit's pivot
     /// still hold.
     fn turned(&self, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
-        let found = || {
-            self.points
-                .iter()
-                .filter(move |p| p.edge == e && p.in_view && p.step >= STEP_SHARE)
-        };
+        // Residual against distance along the edge, one pass of sums.
         let (mut n, mut lo, mut hi) = (0.0, f64::INFINITY, f64::NEG_INFINITY);
-        let (mut sx, mut sy) = (0.0, 0.0);
-        for p in found() {
-            let along = p.tau * pose.scale;
-            (lo, hi) = (lo.min(along), hi.max(along));
-            sx += along;
-            sy += Self::residual(t, pose, p);
+        let (mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0);
+        for p in self
+            .points
+            .iter()
+            .filter(|p| p.edge == e && p.in_view && p.step >= STEP_SHARE)
+        {
+            let (x, y) = (p.tau * pose.scale, Self::residual(t, pose, p));
+            (lo, hi) = (lo.min(x), hi.max(x));
+            (sx, sy, sxx, sxy) = (sx + x, sy + y, sxx + x * x, sxy + x * y);
             n += 1.0;
         }
         if n < 3.0 || hi - lo < MIN_TURN_SPAN_PX {
             return false;
         }
-        let (mx, my) = (sx / n, sy / n);
-        let (mut sxx, mut sxy) = (0.0, 0.0);
-        for p in found() {
-            let dx = p.tau * pose.scale - mx;
-            sxx += dx * dx;
-            sxy += dx * (Self::residual(t, pose, p) - my);
-        }
-        (sxy / sxx).atan().abs() > MAX_TURN_DEG.to_radians()
+        let slope = (n * sxy - sx * sy) / (n * sxx - sx * sx);
+        slope.atan().abs() > MAX_TURN_DEG.to_radians()
     }
 
     /// Whether apex edge `hidden`, whose corner does not show, is hidden by a particle
