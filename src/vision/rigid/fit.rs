@@ -19,7 +19,7 @@ use nalgebra::{Matrix4, Vector4};
 
 use super::station::{Located, Stations};
 use super::{Bounds, Pose, RigidEdge, RigidTemplate};
-use crate::vision::geometry::{add, bilinear, dot, rotate, scale, strip_mean, sub};
+use crate::vision::geometry::{add, along, bilinear, dot, rotate, scale, strip_mean, sub};
 use crate::vision::stations::{COVERED_APEX_SHARE, PAST_APEX_HALF_PX};
 use crate::vision::Miss;
 
@@ -119,6 +119,14 @@ const COVERED_LEVEL: f64 = 0.25;
 /// Where the levels inside a corner and past the apex are read from, pixels: clear of
 /// the blur.
 const LEVEL_NEAR: f64 = 2.5;
+/// A body at least this wide between two facing edges (frame pixels) has its middle
+/// read ([`Fitter::hollow`]): twice the depth the stations read each edge's levels to
+/// (4.5 px), and the blur's margin.
+const MIDDLE_MIN_WIDTH_PX: f64 = 16.0;
+/// Half the side of the square whose mean is a middle's level, pixels.
+const MIDDLE_HALF_PX: i32 = 2;
+/// Facing edges: their inward normals at least this far from parallel (cosine).
+const FACING_COS: f64 = -0.5;
 
 /// One edge as a fit saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -200,6 +208,28 @@ impl Against {
             depth,
         }
     }
+}
+
+/// The distance (reference pixels) from `from`, on edge `e`, along its inward normal
+/// to the nearest other edge facing it whose segment (or its open continuation) the
+/// normal crosses; `None` when none does.
+fn facing_width(t: &RigidTemplate, e: usize, from: [f64; 2]) -> Option<f64> {
+    let normal = t.edges[e].normal;
+    let mut nearest: Option<f64> = None;
+    for (f, other) in t.edges.iter().enumerate() {
+        let cos = dot(other.normal, normal);
+        if f == e || cos > FACING_COS {
+            continue;
+        }
+        let width = (other.offset - dot(other.normal, from)) / cos;
+        let tau = dot(along(other.normal), add(from, scale(normal, width)));
+        let within =
+            (other.open[0] || tau >= other.extent[0]) && (other.open[1] || tau <= other.extent[1]);
+        if width > 0.0 && within && nearest.is_none_or(|d| width < d) {
+            nearest = Some(width);
+        }
+    }
+    nearest
 }
 
 /// The edge whose probe side is not the body the others' are, if one is: the levels
@@ -608,6 +638,8 @@ impl Fitter {
                 Some(Miss::ScaleUnseen)
             } else if let Some(e) = not_one_body(t, &inside) {
                 Some(Miss::WrongAppearance(t.edges[e].name))
+            } else if let Some(e) = self.hollow(frame, t, &pose) {
+                Some(Miss::WrongAppearance(t.edges[e].name))
             } else if !apex_in {
                 Some(Miss::ApexOutside)
             } else if pose.psi.abs() > window_rad + 2.0 * sigma {
@@ -686,21 +718,9 @@ impl Fitter {
             return false;
         }
         let out = scale(inward, -1.0 / len);
-        let (mut probe, mut around, mut n) = (0.0, 0.0, 0usize);
-        for p in self
-            .points
-            .iter()
-            .filter(|p| (p.edge == a || p.edge == b) && p.in_view && Self::holds_final(t, pose, p))
-        {
-            let edge = &t.edges[p.edge];
-            probe += p.inside;
-            around += p.inside - edge.polarity * p.step * edge.step;
-            n += 1;
-        }
-        if n == 0 {
+        let Some((probe, around)) = self.levels(t, pose, |e| e == a || e == b) else {
             return false;
-        }
-        let (probe, around) = (probe / n as f64, around / n as f64);
+        };
         // The mean level over a square of five pixels a side whose near side's centre
         // lies at `from`, reaching along `dir`.
         let level = |from: [f64; 2], dir: [f64; 2]| {
@@ -723,6 +743,72 @@ impl Fitter {
                     .is_some_and(|r| (r - 1.0).abs() <= COVERED_LEVEL || (beyond && r >= 1.0))
             });
         carries_on && past.is_some_and(|r| r < COVERED_APEX_SHARE || beyond)
+    }
+
+    /// The mean levels on the probe's side and outside over the holding stations of
+    /// the edges `of` accepts; `None` when none holds.
+    fn levels(
+        &self,
+        t: &RigidTemplate,
+        pose: &Pose,
+        of: impl Fn(usize) -> bool,
+    ) -> Option<(f64, f64)> {
+        let (mut probe, mut around, mut n) = (0.0, 0.0, 0usize);
+        for p in self.points.iter().filter(|p| {
+            p.edge < MAX_EDGES && of(p.edge) && p.in_view && Self::holds_final(t, pose, p)
+        }) {
+            let edge = &t.edges[p.edge];
+            probe += p.inside;
+            around += p.inside - edge.polarity * p.step * edge.step;
+            n += 1;
+        }
+        (n > 0).then(|| (probe / n as f64, around / n as f64))
+    }
+
+    /// The edge whose outline encloses no body of the probe's, if the fit's edges are
+    /// such outlines: beside each holding station, the body's middle between it and
+    /// the edge facing it (where they stand [`MIDDLE_MIN_WIDTH_PX`] apart or more) is
+    /// read, and the median middle lies past the surroundings' level (darker than the
+    /// surroundings where the probe is the brighter). The stations read each edge's
+    /// levels a few pixels deep only, and two rims of another body (a rail's dark
+    /// outlines around its brighter core, for a dark lever's top and bottom) step as
+    /// the probe's edges do. Named: the edge of the median middle.
+    fn hollow(&self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> Option<usize> {
+        let (probe, around) = self.levels(t, pose, |_| true)?;
+        let mut middles = [(0.0, 0usize); MAX_EDGES * MAX_STATIONS];
+        let mut n = 0;
+        for p in self
+            .points
+            .iter()
+            .filter(|p| p.edge < MAX_EDGES && p.in_view && Self::holds_final(t, pose, p))
+        {
+            let edge = &t.edges[p.edge];
+            let from = edge.point(p.tau);
+            let Some(width) = facing_width(t, p.edge, from) else {
+                continue;
+            };
+            if width * pose.scale < MIDDLE_MIN_WIDTH_PX || n == middles.len() {
+                continue;
+            }
+            let middle = add(from, scale(edge.normal, 0.5 * width));
+            let dir = rotate(edge.normal, pose.psi);
+            let centre = add(pose.apex, scale(rotate(middle, pose.psi), pose.scale));
+            let start = add(centre, scale(dir, -f64::from(MIDDLE_HALF_PX)));
+            let rows = 2 * MIDDLE_HALF_PX as usize + 1;
+            if let Some(level) =
+                strip_mean(start, dir, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
+            {
+                middles[n] = ((level - around) / (probe - around), p.edge);
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return None;
+        }
+        let middles = &mut middles[..n];
+        middles.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (share, e) = middles[n / 2];
+        (share < 0.0).then_some(e)
     }
 
     /// Whether station `p` of `edge` lies under a body beyond the probe's level (brighter
@@ -1002,6 +1088,37 @@ mod tests {
     /// neither hold nor miss the flank, which its other stations show. A level at the
     /// probe's there (a brighter background beside the flank) is no such body: those
     /// stations miss it.
+    #[test]
+    fn two_rims_around_a_core_past_the_surroundings_are_no_probe() {
+        // The needle's flanks 40 px apart: a body 40 px wide, at 180 on 80.
+        let (mut t, pose, _) = needle_at_rest();
+        t.edges[1].extent = [0.0, 40.0];
+        t.edges[2].offset = -40.0;
+        let frame = |core: u8| {
+            GrayImage::from_fn(320, 240, |x, y| {
+                let (x, y) = (f64::from(x), f64::from(y));
+                let level = if !(50.0..=250.0).contains(&x) || !(100.0..=140.0).contains(&y) {
+                    80
+                } else if (112.0..=128.0).contains(&y) {
+                    core
+                } else {
+                    180
+                };
+                image::Luma([level])
+            })
+        };
+        let mut f = fitter(&t, &pose, true);
+        assert_eq!(refusal(&mut f, &t, pose, &frame(180)), None);
+        // A core at the surroundings' level is still read as a body of the probe's
+        // (a real probe's middle may fade); one past it is not.
+        assert_eq!(refusal(&mut f, &t, pose, &frame(80)), None);
+        let flanks = [t.edges[0].name, t.edges[2].name];
+        assert!(matches!(
+            refusal(&mut f, &t, pose, &frame(20)),
+            Some(Miss::WrongAppearance(name)) if flanks.contains(&name)
+        ));
+    }
+
     #[test]
     fn a_particle_across_an_edge_does_not_hide_it() {
         let (t, pose, frame) = needle_at_rest();
