@@ -1083,14 +1083,12 @@ mod tests {
         );
     }
 
-    /// A particle brighter than a bright probe lying across part of its lower flank:
-    /// the stations under it step the wrong way from a level beyond the probe's, and
-    /// neither hold nor miss the flank, which its other stations show. A level at the
-    /// probe's there (a brighter background beside the flank) is no such body: those
-    /// stations miss it.
+    /// The needle's flanks 40 px apart, a body at 180 on 80 whose core 16 px wide lies
+    /// at the probe's level, at the surroundings' (a real probe's middle may fade) or
+    /// past them: only the last is refused, as two rims of another body around its
+    /// core are.
     #[test]
     fn two_rims_around_a_core_past_the_surroundings_are_no_probe() {
-        // The needle's flanks 40 px apart: a body 40 px wide, at 180 on 80.
         let (mut t, pose, _) = needle_at_rest();
         t.edges[1].extent = [0.0, 40.0];
         t.edges[2].offset = -40.0;
@@ -1109,8 +1107,6 @@ mod tests {
         };
         let mut f = fitter(&t, &pose, true);
         assert_eq!(refusal(&mut f, &t, pose, &frame(180)), None);
-        // A core at the surroundings' level is still read as a body of the probe's
-        // (a real probe's middle may fade); one past it is not.
         assert_eq!(refusal(&mut f, &t, pose, &frame(80)), None);
         let flanks = [t.edges[0].name, t.edges[2].name];
         assert!(matches!(
@@ -1119,6 +1115,11 @@ mod tests {
         ));
     }
 
+    /// A particle brighter than a bright probe lying across part of its lower flank:
+    /// the stations under it step the wrong way from a level beyond the probe's, and
+    /// neither hold nor miss the flank, which its other stations show. A level at the
+    /// probe's there (a brighter background beside the flank) is no such body: those
+    /// stations miss it.
     #[test]
     fn a_particle_across_an_edge_does_not_hide_it() {
         let (t, pose, frame) = needle_at_rest();
