@@ -128,6 +128,20 @@ const MIDDLE_HALF_PX: i32 = 2;
 /// Facing edges: their inward normals at least this far from parallel (cosine).
 const FACING_COS: f64 = -0.5;
 
+/// The mean levels on the probe's side of its holding stations and outside them.
+#[derive(Debug, Clone, Copy)]
+struct Levels {
+    probe: f64,
+    around: f64,
+}
+
+impl Levels {
+    /// Level `v` as a share of the way from the surroundings' level to the probe's.
+    fn share(&self, v: f64) -> f64 {
+        (v - self.around) / (self.probe - self.around)
+    }
+}
+
 /// One edge as a fit saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Seen {
@@ -718,7 +732,7 @@ impl Fitter {
             return false;
         }
         let out = scale(inward, -1.0 / len);
-        let Some((probe, around)) = self.levels(t, pose, |e| e == a || e == b) else {
+        let Some(levels) = self.levels(t, pose, |e| e == a || e == b) else {
             return false;
         };
         // The mean level over a square of five pixels a side whose near side's centre
@@ -728,9 +742,7 @@ impl Fitter {
         };
         let edge = &t.edges[hidden];
         let inside = normal(hidden);
-        // Levels as shares of the way from the surroundings' level to the probe's.
-        let share = |v: f64| (v - around) / (probe - around);
-        let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out).map(share);
+        let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out).map(|v| levels.share(v));
         let beyond = past.is_some_and(|r| r > 1.0 + COVERED_LEVEL);
         let carries_on = self
             .corner_stations(t, hidden)
@@ -739,30 +751,37 @@ impl Fitter {
             .all(|p| {
                 let at = add(pose.place(edge, p.tau), scale(inside, LEVEL_NEAR));
                 level(at, inside)
-                    .map(share)
+                    .map(|v| levels.share(v))
                     .is_some_and(|r| (r - 1.0).abs() <= COVERED_LEVEL || (beyond && r >= 1.0))
             });
         carries_on && past.is_some_and(|r| r < COVERED_APEX_SHARE || beyond)
     }
 
+    /// The stations on the edges (not past their ends) that hold them at `pose`.
+    fn holding<'a>(
+        &'a self,
+        t: &'a RigidTemplate,
+        pose: &'a Pose,
+    ) -> impl Iterator<Item = &'a Point> + 'a {
+        self.points
+            .iter()
+            .filter(move |p| p.edge < MAX_EDGES && p.in_view && Self::holds_final(t, pose, p))
+    }
+
     /// The mean levels on the probe's side and outside over the holding stations of
     /// the edges `of` accepts; `None` when none holds.
-    fn levels(
-        &self,
-        t: &RigidTemplate,
-        pose: &Pose,
-        of: impl Fn(usize) -> bool,
-    ) -> Option<(f64, f64)> {
+    fn levels(&self, t: &RigidTemplate, pose: &Pose, of: impl Fn(usize) -> bool) -> Option<Levels> {
         let (mut probe, mut around, mut n) = (0.0, 0.0, 0usize);
-        for p in self.points.iter().filter(|p| {
-            p.edge < MAX_EDGES && of(p.edge) && p.in_view && Self::holds_final(t, pose, p)
-        }) {
+        for p in self.holding(t, pose).filter(|p| of(p.edge)) {
             let edge = &t.edges[p.edge];
             probe += p.inside;
             around += p.inside - edge.polarity * p.step * edge.step;
             n += 1;
         }
-        (n > 0).then(|| (probe / n as f64, around / n as f64))
+        (n > 0).then(|| Levels {
+            probe: probe / n as f64,
+            around: around / n as f64,
+        })
     }
 
     /// The edge whose outline encloses no body of the probe's, if the fit's edges are
@@ -774,14 +793,10 @@ impl Fitter {
     /// outlines around its brighter core, for a dark lever's top and bottom) step as
     /// the probe's edges do. Named: the edge of the median middle.
     fn hollow(&self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> Option<usize> {
-        let (probe, around) = self.levels(t, pose, |_| true)?;
+        let levels = self.levels(t, pose, |_| true)?;
         let mut middles = [(0.0, 0usize); MAX_EDGES * MAX_STATIONS];
         let mut n = 0;
-        for p in self
-            .points
-            .iter()
-            .filter(|p| p.edge < MAX_EDGES && p.in_view && Self::holds_final(t, pose, p))
-        {
+        for p in self.holding(t, pose) {
             let edge = &t.edges[p.edge];
             let from = edge.point(p.tau);
             let Some(width) = facing_width(t, p.edge, from) else {
@@ -798,7 +813,7 @@ impl Fitter {
             if let Some(level) =
                 strip_mean(start, dir, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
             {
-                middles[n] = ((level - around) / (probe - around), p.edge);
+                middles[n] = (levels.share(level), p.edge);
                 n += 1;
             }
         }
