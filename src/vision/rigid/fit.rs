@@ -71,6 +71,13 @@ const ONE_BODY_SHARE: f64 = 0.5;
 /// A station past a closed end shows the edge running on when it steps by this share
 /// of the calibrated step within [`HELD_PX`] of the line.
 const RUN_ON_SHARE: f64 = 0.7;
+/// At the apex, the other apex edge closes the body when its median step is at least
+/// this share of the edge's own next to the apex ([`Fitter::run_on_share`]).
+const CLOSING_SHARE: f64 = 0.5;
+/// The least yardstick (share of the calibrated step) of [`RUN_ON_SHARE`] at an apex
+/// the other apex edge does not close: an edge stepping by less next to the apex is
+/// held by noise-sized steps, which the stations past it would match by chance.
+const MIN_RUN_ON_YARDSTICK: f64 = 0.5;
 /// Share of an edge's stations in view that must hold it.
 pub const HELD_SHARE: f64 = 0.7;
 /// After the second pass, a placement whose stations hold less than this share in all
@@ -277,6 +284,28 @@ fn not_one_body(t: &RigidTemplate, inside: &[f64; MAX_EDGES]) -> Option<usize> {
                 .abs()
                 .total_cmp(&(inside[b] - median).abs())
         })
+}
+
+/// Which end of an apex edge lies at the apex: the one nearer `tau = 0`.
+fn apex_end(edge: &RigidEdge) -> usize {
+    usize::from(edge.extent[0].abs() > edge.extent[1].abs())
+}
+
+/// The median step (share of the calibrated step) of the stations in view among
+/// `points`, at most [`MAX_STATIONS`] of them; 0 when none is.
+fn median_step<'a>(points: impl Iterator<Item = &'a Point>) -> f64 {
+    let mut steps = [0.0; MAX_STATIONS];
+    let mut n = 0;
+    for p in points.filter(|p| p.in_view).take(MAX_STATIONS) {
+        steps[n] = p.step;
+        n += 1;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let steps = &mut steps[..n];
+    steps.sort_by(f64::total_cmp);
+    steps[n / 2]
 }
 
 /// Fits poses; keeps its buffers between calls.
@@ -862,9 +891,8 @@ impl Fitter {
     /// it (fewer when the edge has fewer).
     fn corner_stations(&self, t: &RigidTemplate, e: usize) -> [Option<Point>; APEX_STATIONS] {
         let edge = &t.edges[e];
-        // Stations run from extent[0] to extent[1]; the apex end is the one nearer
-        // tau = 0.
-        let from_low = edge.extent[0].abs() <= edge.extent[1].abs();
+        // Stations run from extent[0] to extent[1].
+        let from_low = apex_end(edge) == 0;
         let count = self.points.iter().filter(|p| p.edge == e).count();
         let nearest = APEX_STATIONS.min(count);
         let skip = if from_low { 0 } else { count - nearest };
@@ -925,25 +953,58 @@ impl Fitter {
         own.min(outline).min(centred)
     }
 
-    /// Every station past a closed end of edge `e` holds it, with the probe's `level`
-    /// on its side (the edge's holding stations'): the probe's body runs on. A particle
-    /// beside the corner of another level (brighter than a bright probe) steps on the
-    /// line's side too, but is not the probe.
+    /// Every station past a closed end of edge `e` holds it (steps by
+    /// [`Fitter::run_on_share`] within [`HELD_PX`] of the line), with the probe's
+    /// `level` on its side (the edge's holding stations'): the probe's body runs on. A
+    /// particle beside the corner of another level (brighter than a bright probe)
+    /// steps on the line's side too, but is not the probe.
     fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize, level: f64) -> bool {
         let edge = &t.edges[e];
         let probe_level = |p: &Point| {
             level.is_nan() || (p.inside - level).abs() <= ONE_BODY_SHARE * edge.step.abs()
         };
         let past = |end: usize| {
+            let share = self.run_on_share(t, e, end);
             self.points
                 .iter()
                 .filter(|p| p.edge == MAX_EDGES + e)
                 .filter(|p| (p.tau > edge.extent[1]) == (end == 1))
-                .filter(|p| p.step >= RUN_ON_SHARE && Self::residual(t, pose, p).abs() <= HELD_PX)
+                .filter(|p| p.step >= share && Self::residual(t, pose, p).abs() <= HELD_PX)
                 .filter(|p| probe_level(p))
                 .count()
         };
         (0..2).any(|end| !edge.open[end] && past(end) == BEYOND_PX.len())
+    }
+
+    /// The step, as a share of the calibrated one, that shows edge `e` running on past
+    /// its closed end `end`: [`RUN_ON_SHARE`], but at the apex when the other apex
+    /// edge does not close the body there (its median step under [`CLOSING_SHARE`] of
+    /// this edge's next to the apex, the median of its [`APEX_STATIONS`] nearest), then
+    /// [`RUN_ON_SHARE`] of this edge's own step next to the apex (within
+    /// [`MIN_RUN_ON_YARDSTICK`] and 1). Past the apex a body that runs on steps as it
+    /// does next to the apex, which a background brighter than on the reference
+    /// weakens: a tipless lever's template laid along an AFM lever's beam over a bright
+    /// sample, its end face placed where noise steps by 0.2-0.3, has the top edge step
+    /// by 0.59-0.68 past the apex as next to it (tool seed 16). Where the other apex
+    /// edge steps as strongly, the body ends there, and a particle at the probe's level
+    /// beside the corner steps nearly as much: a needle at 0.75 of its calibrated step
+    /// on both apex edges, the particle at 0.55-0.68 (several-probe seed 3).
+    fn run_on_share(&self, t: &RigidTemplate, e: usize, end: usize) -> f64 {
+        let other = match t.apex_edges {
+            [a, b] if a == e => b,
+            [a, b] if b == e => a,
+            _ => return RUN_ON_SHARE,
+        };
+        if end != apex_end(&t.edges[e]) {
+            return RUN_ON_SHARE;
+        }
+        let corner = self.corner_stations(t, e);
+        let own = median_step(corner.iter().flatten());
+        let closing = median_step(self.points.iter().filter(|p| p.edge == other));
+        if closing >= CLOSING_SHARE * own {
+            return RUN_ON_SHARE;
+        }
+        RUN_ON_SHARE * own.clamp(MIN_RUN_ON_YARDSTICK, 1.0)
     }
 }
 
@@ -1151,5 +1212,39 @@ mod tests {
             refusal(&mut with_stations(180.0), &t, pose, &frame),
             Some(Miss::EdgeMissing(t.edges[2].name))
         );
+    }
+
+    /// Past the apex the upper flank steps by 0.6 of the calibrated step at three
+    /// stations, with the probe's level on its side. Where it steps by 0.62 next to the
+    /// apex (a background brighter than on the reference) and the end face by 0.25,
+    /// nothing closes the body there and it runs on. With the end face stepping by 0.5
+    /// or more (the probe's end, in a frame of less contrast than its reference), or the
+    /// flank by 1.0 next to the apex, 0.6 is short of running on.
+    #[test]
+    fn a_body_runs_on_past_an_apex_its_closing_edge_does_not_show() {
+        let (t, pose, _) = needle_at_rest();
+        let upper = &t.edges[0];
+        let with = |flank: f64, face: f64| {
+            let mut f = fitter(&t, &pose, true);
+            for p in &mut f.points {
+                p.step = [flank, face, 1.0][p.edge];
+            }
+            for d in BEYOND_PX {
+                let tau = upper.extent[1] + d / pose.scale;
+                f.points.push(Point {
+                    edge: MAX_EDGES,
+                    tau,
+                    at: pose.place(upper, tau),
+                    step: 0.6,
+                    inside: 180.0,
+                    in_view: true,
+                });
+            }
+            f
+        };
+        assert!(with(0.62, 0.25).runs_on(&t, &pose, 0, 180.0));
+        assert!(!with(0.62, 0.5).runs_on(&t, &pose, 0, 180.0));
+        assert!(!with(0.62, 1.0).runs_on(&t, &pose, 0, 180.0));
+        assert!(!with(1.0, 0.25).runs_on(&t, &pose, 0, 180.0));
     }
 }
