@@ -572,7 +572,6 @@ impl Fitter {
         let mut edges = [None; MAX_EDGES];
         let mut confidence: f64 = 1.0;
         let mut refusal: Option<Miss> = None;
-        let mut steps = [0.0; MAX_STATIONS];
         let mut levels = [0.0; MAX_STATIONS];
         // Per edge in view, the median level on the probe's side of its holding
         // stations.
@@ -586,9 +585,6 @@ impl Fitter {
             let mut held = 0;
             let mut span = [f64::NAN; 2];
             for p in points().filter(|p| p.in_view) {
-                if in_view < MAX_STATIONS {
-                    steps[in_view] = p.step;
-                }
                 if in_view == 0 {
                     span[0] = p.tau;
                 }
@@ -608,9 +604,7 @@ impl Fitter {
                 }
                 continue;
             }
-            let n = in_view.min(MAX_STATIONS);
-            steps[..n].sort_by(f64::total_cmp);
-            let median_ratio = steps[n / 2];
+            let median_ratio = median_step(points());
             let m = held.min(MAX_STATIONS);
             if m > 0 {
                 levels[..m].sort_by(f64::total_cmp);
