@@ -8,7 +8,9 @@
 //! - `probes/<size>/<n>-of-<count>`: two probes at 640x480 and four at 1024x768 in
 //!   one view, and the first of them alone on the same frames;
 //! - `rigid/<kind>`: a rigid probe of named edges (needle, tipless cantilever, gripper
-//!   jaw), each frame searched whole, over eight frames of its tool suite;
+//!   jaw), each frame searched whole, over eight frames of its tool suite, and
+//!   `rigid/<kind>-absent` over eight frames of another kind's (every placement
+//!   refused);
 //! - `probes/tool-beside-cantilever/<kind>`: a rigid tool beside an AFM cantilever,
 //!   both tracked, `<kind>-out-of-view` with the tool out of view, and each on two
 //!   threads (`-two-threads`);
@@ -25,7 +27,7 @@ use image::GrayImage;
 use nanoforce::config::{Config, TrackerConfig};
 use nanoforce::scene::{
     self, render_tool_into, tool_suite, Entry, FrameSpec, ProbeGeometry, Session, Setup, Style,
-    ToolKind,
+    ToolKind, ToolSession,
 };
 use nanoforce::vision::{calibrate_rigid, Calibration, Estimate, ProbeSet, RigidTracker, Tracker};
 
@@ -222,10 +224,24 @@ fn bench_tool_beside_cantilever(c: &mut Criterion) {
 }
 
 /// `rigid/<kind>`: a rigid probe searched whole in each of eight frames of the first
-/// sessions of its tool suite (synthetic backgrounds), per frame.
+/// sessions of its tool suite (synthetic backgrounds), per frame;
+/// `rigid/<kind>-absent`: the same tracker on eight frames of the next kind's suite,
+/// none of which shows its probe (every placement fitted and refused).
 fn bench_rigid(c: &mut Criterion) {
     let mut group = c.benchmark_group("rigid");
-    for kind in ToolKind::ALL {
+    let render = |session: &ToolSession| -> Vec<GrayImage> {
+        session
+            .frames
+            .iter()
+            .filter(|f| !f.blank)
+            .map(|f| {
+                let mut g = GrayImage::new(1, 1);
+                render_tool_into(f, &[], &mut g);
+                g
+            })
+            .collect()
+    };
+    for (k, kind) in ToolKind::ALL.into_iter().enumerate() {
         let sessions = tool_suite(kind, 41, 2, 8, 0);
         let session = &sessions[0];
         let mut frame = GrayImage::new(1, 1);
@@ -237,20 +253,21 @@ fn bench_rigid(c: &mut Criterion) {
             .collect();
         let template = calibrate_rigid(&frame, &clicks, session.apex).expect("calibrates");
         let mut tracker = RigidTracker::new(template, 20.0);
-        let frames: Vec<GrayImage> = session
-            .frames
-            .iter()
-            .filter(|f| !f.blank)
-            .map(|f| {
-                let mut g = GrayImage::new(1, 1);
-                render_tool_into(f, &[], &mut g);
-                g
-            })
-            .collect();
+        let frames = render(session);
         group.throughput(Throughput::Elements(frames.len() as u64));
         group.bench_function(kind.name(), |b| {
             b.iter(|| {
                 for f in &frames {
+                    tracker.track(f);
+                }
+            })
+        });
+        let next = ToolKind::ALL[(k + 1) % ToolKind::ALL.len()];
+        let absent = render(&tool_suite(next, 41, 2, 8, 0)[0]);
+        group.throughput(Throughput::Elements(absent.len() as u64));
+        group.bench_function(format!("{}-absent", kind.name()), |b| {
+            b.iter(|| {
+                for f in &absent {
                     tracker.track(f);
                 }
             })

@@ -134,6 +134,11 @@ const MIDDLE_MIN_WIDTH_PX: f64 = 16.0;
 const MIDDLE_HALF_PX: i32 = 2;
 /// Facing edges: their inward normals at least this far from parallel (cosine).
 const FACING_COS: f64 = -0.5;
+/// A body is hollow when more than this share of its middles lie past the
+/// surroundings' level ([`Fitter::hollow`]): a dark lever's template along a rail
+/// whose dark gap it takes for its end holds half its middles in the gap (tool seed
+/// 7), and the probe's body holds them all.
+const HOLLOW_SHARE: f64 = 1.0 / 3.0;
 
 /// The mean levels on the probe's side of its holding stations and outside them.
 #[derive(Debug, Clone, Copy)]
@@ -810,11 +815,12 @@ impl Fitter {
     /// The edge whose outline encloses no body of the probe's, if the fit's edges are
     /// such outlines: beside each holding station, the body's middle between it and
     /// the edge facing it (where they stand [`MIDDLE_MIN_WIDTH_PX`] apart or more) is
-    /// read, and the median middle lies past the surroundings' level (darker than the
-    /// surroundings where the probe is the brighter). The stations read each edge's
-    /// levels a few pixels deep only, and two rims of another body (a rail's dark
-    /// outlines around its brighter core, for a dark lever's top and bottom) step as
-    /// the probe's edges do. Named: the edge of the median middle.
+    /// read, and more than [`HOLLOW_SHARE`] of the middles lie past the surroundings'
+    /// level (darker than the surroundings where the probe is the brighter). The
+    /// stations read each edge's levels a few pixels deep only, and two rims of another
+    /// body (a rail's dark outlines around its brighter core, for a dark lever's top and
+    /// bottom) step as the probe's edges do. Named: the edge of the middle at that
+    /// share.
     fn hollow(&self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> Option<usize> {
         let levels = self.levels(t, pose, |_| true)?;
         let mut middles = [(0.0, 0usize); MAX_EDGES * MAX_STATIONS];
@@ -845,7 +851,7 @@ impl Fitter {
         }
         let middles = &mut middles[..n];
         middles.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (share, e) = middles[n / 2];
+        let (share, e) = middles[(n as f64 * HOLLOW_SHARE) as usize];
         (share < 0.0).then_some(e)
     }
 
@@ -1153,36 +1159,61 @@ mod tests {
         );
     }
 
-    /// The needle's flanks 40 px apart, a body at 180 on 80 whose core 16 px wide lies
-    /// at the probe's level, at the surroundings' (a real probe's middle may fade) or
-    /// past them: only the last is refused, as two rims of another body around its
-    /// core are.
-    #[test]
-    fn two_rims_around_a_core_past_the_surroundings_are_no_probe() {
+    /// The needle template with its flanks 40 px apart along the body, at rest, and a
+    /// frame of its body at 180 on 80 (x 50-250, y 100-140) whose core 16 px wide
+    /// reads `core` from `from_x` on.
+    fn with_core(core: u8, from_x: f64) -> (RigidTemplate, Pose, GrayImage) {
         let (mut t, pose, _) = needle_at_rest();
         t.edges[1].extent = [0.0, 40.0];
         t.edges[2].offset = -40.0;
-        let frame = |core: u8| {
-            GrayImage::from_fn(320, 240, |x, y| {
-                let (x, y) = (f64::from(x), f64::from(y));
-                let level = if !(50.0..=250.0).contains(&x) || !(100.0..=140.0).contains(&y) {
-                    80
-                } else if (112.0..=128.0).contains(&y) {
-                    core
-                } else {
-                    180
-                };
-                image::Luma([level])
-            })
+        // The lower flank runs along -x as its extent grows.
+        t.edges[2].extent = [0.0, 200.0];
+        let frame = GrayImage::from_fn(320, 240, |x, y| {
+            let (x, y) = (f64::from(x), f64::from(y));
+            let level = if !(50.0..=250.0).contains(&x) || !(100.0..=140.0).contains(&y) {
+                80
+            } else if x >= from_x && (112.0..=128.0).contains(&y) {
+                core
+            } else {
+                180
+            };
+            image::Luma([level])
+        });
+        (t, pose, frame)
+    }
+
+    /// A core at the probe's level, at the surroundings' (a real probe's middle may
+    /// fade) or past them: only the last is refused, as two rims of another body
+    /// around its core are.
+    #[test]
+    fn two_rims_around_a_core_past_the_surroundings_are_no_probe() {
+        let refused = |core: u8| {
+            let (t, pose, frame) = with_core(core, 50.0);
+            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
         };
-        let mut f = fitter(&t, &pose, true);
-        assert_eq!(refusal(&mut f, &t, pose, &frame(180)), None);
-        assert_eq!(refusal(&mut f, &t, pose, &frame(80)), None);
+        assert_eq!(refused(180), None);
+        assert_eq!(refused(80), None);
+        let (t, _, _) = with_core(20, 50.0);
         let flanks = [t.edges[0].name, t.edges[2].name];
         assert!(matches!(
-            refusal(&mut f, &t, pose, &frame(20)),
+            refused(20),
             Some(Miss::WrongAppearance(name)) if flanks.contains(&name)
         ));
+    }
+
+    /// The core past the surroundings over only the body's last 90 px, four of the
+    /// nine stations per flank (a dark lever's template along a rail, the rail's dark
+    /// gap taken for its end and its bright core beyond): refused, though the median
+    /// middle shows the probe's level. Over the last 40 px, two of nine (a flaw, a
+    /// particle on the body): verified.
+    #[test]
+    fn a_body_hollow_over_part_of_its_length_is_no_probe() {
+        let refused = |from_x: f64| {
+            let (t, pose, frame) = with_core(20, from_x);
+            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
+        };
+        assert_eq!(refused(210.0), None);
+        assert!(matches!(refused(160.0), Some(Miss::WrongAppearance(_))));
     }
 
     /// A particle brighter than a bright probe lying across part of its lower flank:

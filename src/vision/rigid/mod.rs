@@ -178,6 +178,8 @@ pub struct RigidTracker {
     search: Search,
     fitter: Fitter,
     placements: Vec<Pose>,
+    /// The placements fitted before those with apexes inside runs.
+    tried: Vec<Pose>,
     last: Option<Pose>,
     /// The last pose before the frame last tracked, for tracking it again.
     last_before: Option<Pose>,
@@ -203,6 +205,7 @@ impl RigidTracker {
             search: Search::default(),
             fitter: Fitter::default(),
             placements: Vec::with_capacity(search::MAX_PLACEMENTS + 1),
+            tried: Vec::with_capacity(search::MAX_PLACEMENTS + 1),
             last: None,
             last_before: None,
             coherence: false,
@@ -303,21 +306,54 @@ impl RigidTracker {
     }
 
     /// The estimate from the placements found: the most confident verified fit
-    /// (the first sure one), or the most telling refusal.
+    /// (the first sure one), or the most telling refusal. When none verifies in a
+    /// searched frame, the best placements with apexes inside the first apex edge's
+    /// runs competing too are fitted, those not fitted yet.
     fn fit_placements(&mut self, frame: &GrayImage) -> Estimate {
-        let t = &self.template;
-        if self.placements.is_empty() {
-            self.last = None;
-            return Estimate::missed(Miss::NoCandidates, 0.0);
-        }
-        let mut best: Option<Fit> = None;
         let mut refusal: Option<(Miss, f64)> = None;
+        let mut tried = !self.placements.is_empty();
+        let mut best = self.fit_each(frame, &mut refusal);
+        if best.is_none() && self.searched {
+            std::mem::swap(&mut self.placements, &mut self.tried);
+            self.search.placements_within_runs(
+                &self.pyramid,
+                &self.template,
+                &self.bounds,
+                &self.excluded,
+                &self.tried,
+                &mut self.placements,
+            );
+            tried |= !self.placements.is_empty();
+            best = self.fit_each(frame, &mut refusal);
+        }
+        match best {
+            Some(fit) => {
+                self.last = Some(fit.pose);
+                estimate(&self.template, &fit)
+            }
+            None => {
+                self.last = None;
+                let (miss, confidence) = match refusal {
+                    Some(refusal) => refusal,
+                    None if tried => (Miss::Inconsistent, 0.0),
+                    None => (Miss::NoCandidates, 0.0),
+                };
+                Estimate::missed(miss, confidence)
+            }
+        }
+    }
+
+    /// The most confident verified fit of the placements (the first sure one); else
+    /// `refusal` keeps the most telling refusal.
+    fn fit_each(&mut self, frame: &GrayImage, refusal: &mut Option<(Miss, f64)>) -> Option<Fit> {
+        let t = &self.template;
+        let mut best: Option<Fit> = None;
         for &placement in &self.placements {
             match self.fitter.fit(frame, t, placement, &self.bounds) {
                 // Not a verdict on this probe: the other placements are tried.
                 Ok(fit) if claimed(&self.excluded, fit.pose.apex) => {
                     if refusal.is_none() {
-                        refusal = Some((Miss::OtherProbe, 0.0));
+                        *refusal = Some((Miss::OtherProbe, 0.0));
                     }
                 }
                 Ok(fit) => {
@@ -331,22 +367,12 @@ impl RigidTracker {
                 }
                 Err((miss, confidence)) => {
                     if refusal.is_none_or(|(_, c)| confidence > c) {
-                        refusal = Some((miss, confidence));
+                        *refusal = Some((miss, confidence));
                     }
                 }
             }
         }
-        match best {
-            Some(fit) => {
-                self.last = Some(fit.pose);
-                estimate(t, &fit)
-            }
-            None => {
-                self.last = None;
-                let (miss, confidence) = refusal.unwrap_or((Miss::Inconsistent, 0.0));
-                Estimate::missed(miss, confidence)
-            }
-        }
+        best
     }
 
     /// The estimate of `frame` fitted and verified from `pose` alone, with no search

@@ -9,7 +9,8 @@
 //! casts no vote. Per rotation bin the apex edges' best lines are paired; each pair
 //! places the apex; the scale edge's best line at the distances the scale range allows
 //! gives the scale. The best placements, scored by their summed votes, go on to the
-//! fit and the verification.
+//! fit and the verification; when none verifies, apexes inside the first apex edge's
+//! runs compete too (`Search::placements_within_runs`).
 
 use super::{Bounds, Pose, RigidEdge, RigidTemplate};
 use crate::vision::claim::{claimed, Claim};
@@ -74,6 +75,9 @@ pub struct Search {
     acc: Vec<f32>,
     smooth: Vec<f32>,
     scored: Vec<Scored>,
+    /// The last search's placements with the apex inside a run of the first apex
+    /// edge ([`Search::placements_within_runs`]).
+    within: Vec<Scored>,
     /// Per voting edge, its gradient's direction in the reference (image angle).
     directions: [f64; 3],
     /// Gradient magnitude a pixel needs to vote or support.
@@ -175,40 +179,61 @@ impl Search {
                 s[r] = a[r - 1] + 2.0 * a[r] + a[r + 1];
             }
         }
-        self.score(pyr, template, voting, bounds.scales);
+        self.score(pyr, template, voting, bounds.scales, Apexes::RunEnds);
         self.select(pyr, excluded, out);
+    }
+
+    /// The best placements of the last search (on `pyr`) with apexes inside the first
+    /// apex edge's runs competing too, where the other apex edge shows best among the
+    /// pixels supporting the line, into `out`, best first, but for those `tried`; none
+    /// with its apex on an `excluded` body. For a frame none of whose placements
+    /// verified: a flank running on past the tip along a line of the background (a
+    /// band, another body's outline of its direction) ends its run beyond the end
+    /// face, and neither the run's end nor a line of the end face, too short to be
+    /// voted for, places the apex at the tip.
+    pub fn placements_within_runs(
+        &mut self,
+        pyr: &Pyramid,
+        template: &RigidTemplate,
+        bounds: &Bounds,
+        excluded: &[Option<Claim>],
+        tried: &[Pose],
+        out: &mut Vec<Pose>,
+    ) {
+        let (all_voting, edges) = voting_edges(template);
+        self.score(
+            pyr,
+            template,
+            &all_voting[..edges],
+            bounds.scales,
+            Apexes::WithinRunsToo,
+        );
+        select_from(&self.within, pyr, excluded, out);
+        out.retain(|p| !tried.contains(p));
     }
 
     /// The best placements of the last search (on `pyr`), best first, into `out`; none
     /// with its apex on an `excluded` body. Searching again with more bodies ruled out
     /// needs no new votes.
     pub fn select(&self, pyr: &Pyramid, excluded: &[Option<Claim>], out: &mut Vec<Pose>) {
-        out.clear();
-        for s in &self.scored {
-            if out.len() == MAX_PLACEMENTS {
-                break;
-            }
-            let same = |p: &Pose| {
-                (p.psi - s.pose.psi).abs() <= SAME_PSI_BINS * PSI_STEP
-                    && (p.apex[0] - s.pose.apex[0]).hypot(p.apex[1] - s.pose.apex[1])
-                        <= SAME_APEX_PX * f64::from(pyr.factor)
-            };
-            if !out.iter().any(same) && !claimed(excluded, s.pose.apex) {
-                out.push(s.pose);
-            }
-        }
+        select_from(&self.scored, pyr, excluded, out);
     }
 
     /// Scores every pairing of the apex edges' lines per rotation bin, the scale edge
-    /// looked for at the distances `scales` allow.
+    /// looked for at the distances `scales` allow, with the apexes `apexes` names.
     fn score(
         &mut self,
         pyr: &Pyramid,
         template: &RigidTemplate,
         voting: &[usize],
         scales: ScaleRange,
+        apexes: Apexes,
     ) {
-        self.scored.clear();
+        let scored = match apexes {
+            Apexes::RunEnds => &mut self.scored,
+            Apexes::WithinRunsToo => &mut self.within,
+        };
+        scored.clear();
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         let row = |k: usize, i: usize| (k * n_psi + i) * n_rho;
         let factor = f64::from(pyr.factor);
@@ -252,11 +277,22 @@ impl Search {
                     self.threshold,
                     &end_face,
                 );
+                let within_run = match apexes {
+                    Apexes::RunEnds => None,
+                    Apexes::WithinRunsToo => within_runs(
+                        pyr,
+                        &line(0, ra),
+                        self.centre,
+                        direction,
+                        self.threshold,
+                        &end_face,
+                    ),
+                };
                 let crossings = b
                     .iter()
                     .flatten()
                     .filter_map(|&(rb, _)| line(0, ra).intersect(&line(1, rb)));
-                for apex in along_run.into_iter().chain(crossings) {
+                for apex in along_run.into_iter().chain(within_run).chain(crossings) {
                     let apex_det = [apex[0] + self.centre[0], apex[1] + self.centre[1]];
                     if !(apex_det[0] >= 0.0
                         && apex_det[1] >= 0.0
@@ -298,7 +334,7 @@ impl Search {
                         }
                         None => (1.0, 0.0),
                     };
-                    self.scored.push(Scored {
+                    scored.push(Scored {
                         pose: Pose {
                             psi,
                             scale,
@@ -309,7 +345,35 @@ impl Search {
                 }
             }
         }
-        self.scored.sort_by(|x, y| y.votes.total_cmp(&x.votes));
+        scored.sort_by(|x, y| y.votes.total_cmp(&x.votes));
+    }
+}
+
+/// Where a search places the apex on the first apex edge's lines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Apexes {
+    /// At a run's end (`run_end`) and where the other apex edge's lines cross it.
+    RunEnds,
+    /// There, and inside a run where the other apex edge shows best (`within_runs`).
+    WithinRunsToo,
+}
+
+/// The best of `scored`, best first, into `out`: at most [`MAX_PLACEMENTS`], one of
+/// each rotation and apex, none with its apex on an `excluded` body.
+fn select_from(scored: &[Scored], pyr: &Pyramid, excluded: &[Option<Claim>], out: &mut Vec<Pose>) {
+    out.clear();
+    for s in scored {
+        if out.len() == MAX_PLACEMENTS {
+            break;
+        }
+        let same = |p: &Pose| {
+            (p.psi - s.pose.psi).abs() <= SAME_PSI_BINS * PSI_STEP
+                && (p.apex[0] - s.pose.apex[0]).hypot(p.apex[1] - s.pose.apex[1])
+                    <= SAME_APEX_PX * f64::from(pyr.factor)
+        };
+        if !out.iter().any(same) && !claimed(excluded, s.pose.apex) {
+            out.push(s.pose);
+        }
     }
 }
 
@@ -391,6 +455,47 @@ fn run_end(
         _ => longest_end,
     };
     Some(sub(point(end), centre))
+}
+
+/// Where along `line` (detection pixels from `centre`), the first apex edge's line
+/// with gradients along `direction`, the other apex edge `end_face` shows best from a
+/// pixel supporting the line, if it shows along at least half its length there. Only
+/// the pixels from which the end face shows two pixels on are scored: no other is the
+/// tip, and each score reads the end face's whole length.
+fn within_runs(
+    pyr: &Pyramid,
+    line: &Line,
+    centre: [f64; 2],
+    direction: f64,
+    threshold: f32,
+    end_face: &ApexEdge,
+) -> Option<[f64; 2]> {
+    let n = line.normal;
+    let t = [n[1], -n[0]];
+    let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
+    let (w, h) = (pyr.width as f64, pyr.height as f64);
+    let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
+    let point = |u: f64| add(foot, scale(t, u));
+    let supports = Support::new(direction, threshold);
+    let across = [-end_face.from_apex[1], end_face.from_apex[0]];
+    let mut best: Option<(usize, f64)> = None;
+    let mut u = u0.ceil();
+    while u <= u1 {
+        let p = point(u);
+        if supports.near(pyr, p, n)
+            && end_face
+                .supports
+                .near(pyr, add(p, scale(end_face.from_apex, 2.0)), across)
+        {
+            let support = end_face.support(pyr, p);
+            if best.is_none_or(|(b, _)| support > b) {
+                best = Some((support, u));
+            }
+        }
+        u += 1.0;
+    }
+    let (support, u) = best?;
+    (2 * support >= end_face.pixels()).then(|| sub(point(u), centre))
 }
 
 /// A detection pixel supports an edge when its gradient is strong and within
@@ -586,6 +691,47 @@ mod tests {
         };
         let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &elsewhere).unwrap();
         assert!((apex[0] + centre[0] - 99.0).abs() <= 1.5, "{apex:?}");
+    }
+
+    /// A bright body (200 on 50) below y = 50 from x = 20 to its end face at x = 150,
+    /// and a band of the body's level two pixels thick along its upper flank's line on
+    /// to x = 190 (a line of the background in line with the flank): the flank's
+    /// support runs on to the band's end, where nothing shows the end face. Inside the
+    /// run the end face shows at the tip.
+    #[test]
+    fn the_apex_within_a_run_is_where_the_end_face_shows() {
+        let frame = GrayImage::from_fn(200, 100, |x, y| {
+            let body = (20..150).contains(&x) && y >= 50;
+            let band = (150..190).contains(&x) && (50..52).contains(&y);
+            image::Luma([if body || band { 200 } else { 50 }])
+        });
+        let mut pyr = Pyramid::default();
+        pyr.build_binned(&frame, 1);
+        let centre = [100.0, 50.0];
+        let flank = Line {
+            normal: [0.0, 1.0],
+            rho: 0.0,
+        };
+        let down = std::f64::consts::FRAC_PI_2;
+        let end_face = ApexEdge {
+            from_apex: [0.0, 1.0],
+            length: 20.0,
+            supports: Support::new(std::f64::consts::PI, 10.0),
+        };
+        let at = |apex: [f64; 2]| [apex[0] + centre[0], apex[1] + centre[1]];
+        let run = at(run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap());
+        assert!((run[0] - 189.0).abs() <= 1.5, "{run:?}");
+        let within = at(within_runs(&pyr, &flank, centre, down, 10.0, &end_face).unwrap());
+        assert!(
+            (within[0] - 149.0).abs() <= 1.5 && (within[1] - 50.0).abs() < 1.0,
+            "{within:?}"
+        );
+        // Where the end face shows nowhere along the run, no apex within it.
+        let elsewhere = ApexEdge {
+            from_apex: [0.0, -1.0],
+            ..end_face
+        };
+        assert!(within_runs(&pyr, &flank, centre, down, 10.0, &elsewhere).is_none());
     }
 
     /// Where the first apex edge's support ends places the apex: the long flank's,
