@@ -395,12 +395,7 @@ fn run_end(
     end_face: &ApexEdge,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
-    let t = [n[1], -n[0]];
-    let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
-    let (w, h) = (pyr.width as f64, pyr.height as f64);
-    let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
-    // Detection pixels of the point `u` along the line.
-    let point = |u: f64| add(foot, scale(t, u));
+    let (point, [u0, u1]) = walk(pyr, line, centre)?;
     let supports = Support::new(direction, threshold);
     let supported = |u: f64| supports.near(pyr, point(u), n);
     // The longest run (length, from, to); the best run end by the end face's support
@@ -457,6 +452,22 @@ fn run_end(
     Some(sub(point(end), centre))
 }
 
+/// A walk along `line` (detection pixels from `centre`): the detection pixel `u`
+/// along the line's direction from its foot, and the range of `u` that stays 2 px
+/// inside the detection image; none when the line misses it.
+fn walk(
+    pyr: &Pyramid,
+    line: &Line,
+    centre: [f64; 2],
+) -> Option<(impl Fn(f64) -> [f64; 2], [f64; 2])> {
+    let n = line.normal;
+    let t = [n[1], -n[0]];
+    let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
+    let (w, h) = (pyr.width as f64, pyr.height as f64);
+    let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
+    Some((move |u: f64| add(foot, scale(t, u)), [u0, u1]))
+}
+
 /// Where along `line` (detection pixels from `centre`), the first apex edge's line
 /// with gradients along `direction`, the other apex edge `end_face` shows best from a
 /// pixel supporting the line, if it shows along at least half its length there. Only
@@ -471,11 +482,7 @@ fn within_runs(
     end_face: &ApexEdge,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
-    let t = [n[1], -n[0]];
-    let foot = [n[0] * line.rho + centre[0], n[1] * line.rho + centre[1]];
-    let (w, h) = (pyr.width as f64, pyr.height as f64);
-    let (u0, u1) = clip_to_rect(foot, t, [2.0, 2.0], [w - 3.0, h - 3.0])?;
-    let point = |u: f64| add(foot, scale(t, u));
+    let (point, [u0, u1]) = walk(pyr, line, centre)?;
     let supports = Support::new(direction, threshold);
     let across = [-end_face.from_apex[1], end_face.from_apex[0]];
     let mut best: Option<(usize, f64)> = None;
@@ -651,86 +658,78 @@ mod tests {
         t
     }
 
-    /// A bright body (200 on 50) below y = 50 from x = 20 to its end face at x = 150,
-    /// its upper flank hidden over x = 100-110 by a band of the body's level above
-    /// it: the flank's support breaks into a long run (to x = 99) and a short one
-    /// (to the end, x = 150). The apex is where the end face shows, at the short
-    /// run's end, not at the long run's.
-    #[test]
-    fn the_apex_is_the_run_end_where_the_end_face_shows() {
+    /// The detection image (unbinned) of a bright body (200 on 50) below y = 50 from
+    /// x = 20 to its end face at x = 150, with the pixels `band` accepts at the body's
+    /// level too; the flank's line y = 50 from the centre (100, 50), the body below it
+    /// (its normal and gradient point down, +y, and along it +x runs toward the end
+    /// face); and the end face, 20 px down from the apex.
+    fn body_and_band(band: impl Fn(u32, u32) -> bool) -> (Pyramid, Line, ApexEdge) {
         let frame = GrayImage::from_fn(200, 100, |x, y| {
             let body = (20..150).contains(&x) && y >= 50;
-            let band = (100..=110).contains(&x) && (30..50).contains(&y);
-            image::Luma([if body || band { 200 } else { 50 }])
+            image::Luma([if body || band(x, y) { 200 } else { 50 }])
         });
         let mut pyr = Pyramid::default();
         pyr.build_binned(&frame, 1);
-        let centre = [100.0, 50.0];
-        // The flank y = 50, the body below it: its normal and gradient point down
-        // (+y), and along it (+x) runs toward the end face.
         let flank = Line {
             normal: [0.0, 1.0],
             rho: 0.0,
         };
-        let down = std::f64::consts::FRAC_PI_2;
         let end_face = ApexEdge {
             from_apex: [0.0, 1.0],
             length: 20.0,
             supports: Support::new(std::f64::consts::PI, 10.0),
         };
-        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
-        let at = [apex[0] + centre[0], apex[1] + centre[1]];
-        assert!(
-            (at[0] - 149.0).abs() <= 1.5 && (at[1] - 50.0).abs() < 1.0,
-            "{at:?}"
-        );
-        // Without the end face there, the longest run's end.
-        let elsewhere = ApexEdge {
+        (pyr, flank, end_face)
+    }
+
+    const CENTRE: [f64; 2] = [100.0, 50.0];
+    const DOWN: f64 = std::f64::consts::FRAC_PI_2;
+
+    /// Whether `apex` (detection pixels from [`CENTRE`]) lies at the body's tip.
+    fn at_tip(apex: [f64; 2]) -> bool {
+        (apex[0] + CENTRE[0] - 149.0).abs() <= 1.5 && (apex[1] + CENTRE[1] - 50.0).abs() < 1.0
+    }
+
+    /// `end_face` looked for up from the apex, where the body shows nothing.
+    fn looking_up(end_face: ApexEdge) -> ApexEdge {
+        ApexEdge {
             from_apex: [0.0, -1.0],
             ..end_face
-        };
+        }
+    }
+
+    /// The body with its upper flank hidden over x = 100-110 by a band of the body's
+    /// level above it: the flank's support breaks into a long run (to x = 99) and a
+    /// short one (to the end, x = 150). The apex is where the end face shows, at the
+    /// short run's end, not at the long run's.
+    #[test]
+    fn the_apex_is_the_run_end_where_the_end_face_shows() {
+        let (pyr, flank, end_face) =
+            body_and_band(|x, y| (100..=110).contains(&x) && (30..50).contains(&y));
+        let (centre, down) = (CENTRE, DOWN);
+        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
+        assert!(at_tip(apex), "{apex:?}");
+        // Without the end face there, the longest run's end.
+        let elsewhere = looking_up(end_face);
         let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &elsewhere).unwrap();
         assert!((apex[0] + centre[0] - 99.0).abs() <= 1.5, "{apex:?}");
     }
 
-    /// A bright body (200 on 50) below y = 50 from x = 20 to its end face at x = 150,
-    /// and a band of the body's level two pixels thick along its upper flank's line on
-    /// to x = 190 (a line of the background in line with the flank): the flank's
+    /// The body with a band of its level two pixels thick along its upper flank's line
+    /// on to x = 190 (a line of the background in line with the flank): the flank's
     /// support runs on to the band's end, where nothing shows the end face. Inside the
     /// run the end face shows at the tip.
     #[test]
     fn the_apex_within_a_run_is_where_the_end_face_shows() {
-        let frame = GrayImage::from_fn(200, 100, |x, y| {
-            let body = (20..150).contains(&x) && y >= 50;
-            let band = (150..190).contains(&x) && (50..52).contains(&y);
-            image::Luma([if body || band { 200 } else { 50 }])
-        });
-        let mut pyr = Pyramid::default();
-        pyr.build_binned(&frame, 1);
-        let centre = [100.0, 50.0];
-        let flank = Line {
-            normal: [0.0, 1.0],
-            rho: 0.0,
-        };
-        let down = std::f64::consts::FRAC_PI_2;
-        let end_face = ApexEdge {
-            from_apex: [0.0, 1.0],
-            length: 20.0,
-            supports: Support::new(std::f64::consts::PI, 10.0),
-        };
-        let at = |apex: [f64; 2]| [apex[0] + centre[0], apex[1] + centre[1]];
-        let run = at(run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap());
-        assert!((run[0] - 189.0).abs() <= 1.5, "{run:?}");
-        let within = at(within_runs(&pyr, &flank, centre, down, 10.0, &end_face).unwrap());
-        assert!(
-            (within[0] - 149.0).abs() <= 1.5 && (within[1] - 50.0).abs() < 1.0,
-            "{within:?}"
-        );
+        let (pyr, flank, end_face) =
+            body_and_band(|x, y| (150..190).contains(&x) && (50..52).contains(&y));
+        let (centre, down) = (CENTRE, DOWN);
+        let run = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
+        assert!((run[0] + centre[0] - 189.0).abs() <= 1.5, "{run:?}");
+        let within = within_runs(&pyr, &flank, centre, down, 10.0, &end_face).unwrap();
+        assert!(at_tip(within), "{within:?}");
         // Where the end face shows nowhere along the run, no apex within it.
-        let elsewhere = ApexEdge {
-            from_apex: [0.0, -1.0],
-            ..end_face
-        };
+        let elsewhere = looking_up(end_face);
         assert!(within_runs(&pyr, &flank, centre, down, 10.0, &elsewhere).is_none());
     }
 
