@@ -256,7 +256,6 @@ impl Search {
             } else {
                 -1.0
             };
-            let direction = self.directions[0] + psi;
             let [first_face, end_face] = [0, 1].map(|k| {
                 ApexEdge::of(
                     &template.edges[voting[k]],
@@ -272,9 +271,8 @@ impl Search {
                     pyr,
                     &line(0, ra),
                     self.centre,
-                    direction,
+                    &first_face.supports,
                     toward,
-                    self.threshold,
                     &end_face,
                 );
                 let within_run = match apexes {
@@ -283,8 +281,7 @@ impl Search {
                         pyr,
                         &line(0, ra),
                         self.centre,
-                        direction,
-                        self.threshold,
+                        &first_face.supports,
                         &end_face,
                     ),
                 };
@@ -378,7 +375,7 @@ fn select_from(scored: &[Scored], pyr: &Pyramid, excluded: &[Option<Claim>], out
 }
 
 /// Where the apex lies along `line` (detection pixels from `centre`), the first apex
-/// edge's line with gradients along `direction`: at an end of a run of pixels
+/// edge's line, whose pixels `supports` tells: at an end of a run of pixels
 /// supporting it, the end `toward` points to along it (+1: along `along(normal)`).
 /// Of the runs' ends, the one where `end_face` (the second apex edge) shows best, if
 /// it shows along at least half its length there and better than at the longest
@@ -389,14 +386,12 @@ fn run_end(
     pyr: &Pyramid,
     line: &Line,
     centre: [f64; 2],
-    direction: f64,
+    supports: &Support,
     toward: f64,
-    threshold: f32,
     end_face: &ApexEdge,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
     let (point, [u0, u1]) = walk(pyr, line, centre)?;
-    let supports = Support::new(direction, threshold);
     let supported = |u: f64| supports.near(pyr, point(u), n);
     // The longest run (length, from, to); the best run end by the end face's support
     // (support, position), and the end face's support at the longest run's end.
@@ -469,7 +464,7 @@ fn walk(
 }
 
 /// Where along `line` (detection pixels from `centre`), the first apex edge's line
-/// with gradients along `direction`, the other apex edge `end_face` shows best from a
+/// whose pixels `supports` tells, the other apex edge `end_face` shows best from a
 /// pixel supporting the line, if it shows along at least half its length there. Only
 /// the pixels from which the end face shows two pixels on are scored: no other is the
 /// tip, and each score reads the end face's whole length.
@@ -477,13 +472,11 @@ fn within_runs(
     pyr: &Pyramid,
     line: &Line,
     centre: [f64; 2],
-    direction: f64,
-    threshold: f32,
+    supports: &Support,
     end_face: &ApexEdge,
 ) -> Option<[f64; 2]> {
     let n = line.normal;
     let (point, [u0, u1]) = walk(pyr, line, centre)?;
-    let supports = Support::new(direction, threshold);
     let across = [-end_face.from_apex[1], end_face.from_apex[0]];
     let mut best: Option<(usize, f64)> = None;
     let mut u = u0.ceil();
@@ -683,7 +676,11 @@ mod tests {
     }
 
     const CENTRE: [f64; 2] = [100.0, 50.0];
-    const DOWN: f64 = std::f64::consts::FRAC_PI_2;
+
+    /// The flank's supporting pixels: gradients pointing down (+y).
+    fn flank_supports() -> Support {
+        Support::new(std::f64::consts::FRAC_PI_2, 10.0)
+    }
 
     /// Whether `apex` (detection pixels from [`CENTRE`]) lies at the body's tip.
     fn at_tip(apex: [f64; 2]) -> bool {
@@ -706,13 +703,12 @@ mod tests {
     fn the_apex_is_the_run_end_where_the_end_face_shows() {
         let (pyr, flank, end_face) =
             body_and_band(|x, y| (100..=110).contains(&x) && (30..50).contains(&y));
-        let (centre, down) = (CENTRE, DOWN);
-        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
+        let apex = run_end(&pyr, &flank, CENTRE, &flank_supports(), 1.0, &end_face).unwrap();
         assert!(at_tip(apex), "{apex:?}");
         // Without the end face there, the longest run's end.
         let elsewhere = looking_up(end_face);
-        let apex = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &elsewhere).unwrap();
-        assert!((apex[0] + centre[0] - 99.0).abs() <= 1.5, "{apex:?}");
+        let apex = run_end(&pyr, &flank, CENTRE, &flank_supports(), 1.0, &elsewhere).unwrap();
+        assert!((apex[0] + CENTRE[0] - 99.0).abs() <= 1.5, "{apex:?}");
     }
 
     /// The body with a band of its level two pixels thick along its upper flank's line
@@ -723,14 +719,13 @@ mod tests {
     fn the_apex_within_a_run_is_where_the_end_face_shows() {
         let (pyr, flank, end_face) =
             body_and_band(|x, y| (150..190).contains(&x) && (50..52).contains(&y));
-        let (centre, down) = (CENTRE, DOWN);
-        let run = run_end(&pyr, &flank, centre, down, 1.0, 10.0, &end_face).unwrap();
-        assert!((run[0] + centre[0] - 189.0).abs() <= 1.5, "{run:?}");
-        let within = within_runs(&pyr, &flank, centre, down, 10.0, &end_face).unwrap();
+        let run = run_end(&pyr, &flank, CENTRE, &flank_supports(), 1.0, &end_face).unwrap();
+        assert!((run[0] + CENTRE[0] - 189.0).abs() <= 1.5, "{run:?}");
+        let within = within_runs(&pyr, &flank, CENTRE, &flank_supports(), &end_face).unwrap();
         assert!(at_tip(within), "{within:?}");
         // Where the end face shows nowhere along the run, no apex within it.
         let elsewhere = looking_up(end_face);
-        assert!(within_runs(&pyr, &flank, centre, down, 10.0, &elsewhere).is_none());
+        assert!(within_runs(&pyr, &flank, CENTRE, &flank_supports(), &elsewhere).is_none());
     }
 
     /// Where the first apex edge's support ends places the apex: the long flank's,
