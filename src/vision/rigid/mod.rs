@@ -311,7 +311,7 @@ impl RigidTracker {
     /// runs competing too are fitted, those not fitted yet.
     fn fit_placements(&mut self, frame: &GrayImage) -> Estimate {
         let mut refusal: Option<(Miss, f64)> = None;
-        let mut tried = !self.placements.is_empty();
+        let mut placed = !self.placements.is_empty();
         let mut best = self.fit_each(frame, &mut refusal);
         if best.is_none() && self.searched {
             std::mem::swap(&mut self.placements, &mut self.tried);
@@ -323,7 +323,7 @@ impl RigidTracker {
                 &self.tried,
                 &mut self.placements,
             );
-            tried |= !self.placements.is_empty();
+            placed |= !self.placements.is_empty();
             best = self.fit_each(frame, &mut refusal);
         }
         match best {
@@ -335,7 +335,7 @@ impl RigidTracker {
                 self.last = None;
                 let (miss, confidence) = match refusal {
                     Some(refusal) => refusal,
-                    None if tried => (Miss::Inconsistent, 0.0),
+                    None if placed => (Miss::Inconsistent, 0.0),
                     None => (Miss::NoCandidates, 0.0),
                 };
                 Estimate::missed(miss, confidence)
