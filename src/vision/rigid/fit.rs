@@ -130,8 +130,17 @@ const LEVEL_NEAR: f64 = 2.5;
 /// read ([`Fitter::hollow`]): twice the depth the stations read each edge's levels to
 /// (4.5 px), and the blur's margin.
 const MIDDLE_MIN_WIDTH_PX: f64 = 16.0;
-/// Half the side of the square whose mean is a middle's level, pixels.
+/// Half the side of the square whose mean is a middle's or a rim's level, pixels.
 const MIDDLE_HALF_PX: i32 = 2;
+/// An edge's outside is read again this far out from its located steps, pixels
+/// (past the 4.5 px the stations read), at its holding stations ([`Fitter::rim`]).
+const RIM_PX: f64 = 8.0;
+/// An edge with at least this many holding stations is a rim when more than half of
+/// them have the outside read [`RIM_PX`] out back more than halfway to the probe's
+/// level: a line of the background (a scratch three pixels wide) steps as the probe's
+/// edge does, and a body beside it is no probe. A blunt end's few stations read what
+/// lies beyond a short face: the needle's own surroundings, a particle.
+const MIN_RIM_STATIONS: usize = 6;
 /// Facing edges: their inward normals at least this far from parallel (cosine).
 const FACING_COS: f64 = -0.5;
 /// A body is hollow when more than this share of its middles lie past the
@@ -682,6 +691,8 @@ impl Fitter {
                 Some(Miss::WrongAppearance(t.edges[e].name))
             } else if let Some(e) = self.hollow(frame, t, &pose) {
                 Some(Miss::WrongAppearance(t.edges[e].name))
+            } else if let Some(e) = self.rim(frame, t, &pose) {
+                Some(Miss::WrongAppearance(t.edges[e].name))
             } else if !apex_in {
                 Some(Miss::ApexOutside)
             } else if pose.psi.abs() > window_rad + 2.0 * sigma {
@@ -853,6 +864,38 @@ impl Fitter {
         middles.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (share, e) = middles[(n as f64 * HOLLOW_SHARE) as usize];
         (share < 0.0).then_some(e)
+    }
+
+    /// The edge that is a rim, if one is: of its holding stations (at least
+    /// [`MIN_RIM_STATIONS`]), more than half have the outside [`RIM_PX`] out from the
+    /// located step back more than halfway from the level outside the step to the
+    /// level inside it. A dark needle's template took the dark wedge between a bright
+    /// scratch three pixels wide and a sample's bright edge, closed by another probe's
+    /// tip, its flanks and blunt end stepping as the needle's do (tool seed 7, frames
+    /// without a tool).
+    fn rim(&self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> Option<usize> {
+        let rows = 2 * MIDDLE_HALF_PX as usize + 1;
+        (0..t.edges.len()).find(|&e| {
+            let edge = &t.edges[e];
+            let normal = rotate(edge.normal, pose.psi);
+            let across = along(normal);
+            let (mut rims, mut n) = (0, 0);
+            for p in self.holding(t, pose).filter(|p| p.edge == e) {
+                let centre = add(p.at, scale(normal, -RIM_PX));
+                let start = add(centre, scale(across, -f64::from(MIDDLE_HALF_PX)));
+                let Some(far) =
+                    strip_mean(start, across, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
+                else {
+                    continue;
+                };
+                let outside = p.inside - edge.polarity * p.step * edge.step;
+                n += 1;
+                if (far - outside) * edge.polarity > 0.5 * (p.inside - outside) * edge.polarity {
+                    rims += 1;
+                }
+            }
+            n >= MIN_RIM_STATIONS && 2 * rims > n
+        })
     }
 
     /// Whether station `p` of `edge` lies under a body beyond the probe's level (brighter
@@ -1180,6 +1223,27 @@ mod tests {
             image::Luma([level])
         });
         (t, pose, frame)
+    }
+
+    /// The body of [`with_core`] with the frame above its upper flank back at the
+    /// probe's level from `band` px out: a band of 3 px (a scratch along the flank) is
+    /// a rim, refused; one of 12 px is surroundings.
+    #[test]
+    fn an_edge_whose_outside_is_a_thin_band_is_a_line_of_the_background() {
+        let refused = |band: u32| {
+            let (t, pose, body) = with_core(180, 50.0);
+            let frame = GrayImage::from_fn(body.width(), body.height(), |x, y| {
+                if y + band < 100 {
+                    image::Luma([180])
+                } else {
+                    *body.get_pixel(x, y)
+                }
+            });
+            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
+        };
+        let upper = crate::vision::rigid::needle_template().edges[0].name;
+        assert_eq!(refused(12), None);
+        assert_eq!(refused(3), Some(Miss::WrongAppearance(upper)));
     }
 
     /// A core at the probe's level, at the surroundings' (a real probe's middle may

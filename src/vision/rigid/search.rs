@@ -36,6 +36,13 @@ const MIN_PEAK_VOTES: f32 = 4.0;
 /// binning; twice that joins an edge to lines beyond its end).
 const RUN_HALF_WIDTH: i32 = 1;
 const RUN_ANGLE_RAD: f64 = 0.35;
+/// The first apex edge's pixels support its line within this distance, frame pixels
+/// (and at least [`RUN_HALF_WIDTH`]): a line of the search's bins (a degree, a pixel)
+/// through a long edge drifts from it toward its ends, and a needle's flank of
+/// 600 px, searched at full resolution for its short end face, lay 2.6 px from its
+/// line at the tip (tool seed 13), where its run stopped short. The other apex edge
+/// is short enough not to drift.
+const FLANK_HALF_WIDTH_PX: f64 = 2.0;
 const RUN_GAP: usize = 4;
 /// Placements handed to the fit, best first.
 pub const MAX_PLACEMENTS: usize = 6;
@@ -261,7 +268,15 @@ impl Search {
                     &template.edges[voting[k]],
                     psi,
                     scales.lo / factor,
-                    Support::new(self.directions[k] + psi, self.threshold),
+                    Support::new(
+                        self.directions[k] + psi,
+                        self.threshold,
+                        if k == 0 {
+                            flank_half_width(pyr.factor)
+                        } else {
+                            RUN_HALF_WIDTH
+                        },
+                    ),
                 )
             });
             for &(ra, _) in a.iter().flatten() {
@@ -499,21 +514,23 @@ fn within_runs(
 }
 
 /// A detection pixel supports an edge when its gradient is strong and within
-/// [`RUN_ANGLE_RAD`] of the edge's.
+/// [`RUN_ANGLE_RAD`] of the edge's; a line, when it does within `half_width` of it.
 struct Support {
     cos: f32,
     sin: f32,
     threshold: f32,
     min_dot: f32,
+    half_width: i32,
 }
 
 impl Support {
-    fn new(direction: f64, threshold: f32) -> Support {
+    fn new(direction: f64, threshold: f32, half_width: i32) -> Support {
         Support {
             cos: direction.cos() as f32,
             sin: direction.sin() as f32,
             threshold,
             min_dot: RUN_ANGLE_RAD.cos() as f32 * threshold,
+            half_width,
         }
     }
 
@@ -529,12 +546,17 @@ impl Support {
                 >= self.min_dot * pyr.mag[i] / self.threshold
     }
 
-    /// Whether a detection pixel within [`RUN_HALF_WIDTH`] of `p` along the unit
-    /// vector `across` supports the edge.
+    /// Whether a detection pixel within `half_width` of `p` along the unit vector
+    /// `across` supports the edge.
     fn near(&self, pyr: &Pyramid, p: [f64; 2], across: [f64; 2]) -> bool {
-        (-RUN_HALF_WIDTH..=RUN_HALF_WIDTH)
+        (-self.half_width..=self.half_width)
             .any(|j| self.at(pyr, add(p, scale(across, f64::from(j)))))
     }
+}
+
+/// [`FLANK_HALF_WIDTH_PX`] in detection pixels binned by `factor`.
+fn flank_half_width(factor: u32) -> i32 {
+    ((FLANK_HALF_WIDTH_PX / f64::from(factor)).round() as i32).max(RUN_HALF_WIDTH)
 }
 
 /// An apex edge as a candidate apex would have it: its unit direction from the apex,
@@ -670,16 +692,17 @@ mod tests {
         let end_face = ApexEdge {
             from_apex: [0.0, 1.0],
             length: 20.0,
-            supports: Support::new(std::f64::consts::PI, 10.0),
+            supports: Support::new(std::f64::consts::PI, 10.0, RUN_HALF_WIDTH),
         };
         (pyr, flank, end_face)
     }
 
     const CENTRE: [f64; 2] = [100.0, 50.0];
 
-    /// The flank's supporting pixels: gradients pointing down (+y).
+    /// The flank's supporting pixels: gradients pointing down (+y), within the band of
+    /// a flank searched unbinned.
     fn flank_supports() -> Support {
-        Support::new(std::f64::consts::FRAC_PI_2, 10.0)
+        Support::new(std::f64::consts::FRAC_PI_2, 10.0, flank_half_width(1))
     }
 
     /// Whether `apex` (detection pixels from [`CENTRE`]) lies at the body's tip.
@@ -726,6 +749,24 @@ mod tests {
         // Where the end face shows nowhere along the run, no apex within it.
         let elsewhere = looking_up(end_face);
         assert!(within_runs(&pyr, &flank, CENTRE, &flank_supports(), &elsewhere).is_none());
+    }
+
+    /// The body's flank read along a line turned from it by 1.9 deg, which lies 3 px
+    /// inside the body at the tip (unbinned; the 5-tap gradient spreads the step over
+    /// two pixels either side): the flank's support runs on to where the line leaves
+    /// the band of 2 px, 2 px from the tip, not to 14 px short of it as in a band of
+    /// one pixel.
+    #[test]
+    fn a_line_drifting_from_a_long_flank_ends_its_run_at_the_tip() {
+        let (pyr, _, end_face) = body_and_band(|_, _| false);
+        let turn = (3.0f64 / 90.0).asin();
+        let drifting = Line {
+            normal: [-turn.sin(), turn.cos()],
+            rho: 40.0 * turn.sin(),
+        };
+        let apex = run_end(&pyr, &drifting, CENTRE, &flank_supports(), 1.0, &end_face).unwrap();
+        assert!((apex[0] + CENTRE[0] - 149.0).abs() <= 2.5, "{apex:?}");
+        assert_eq!([1, 2, 4].map(flank_half_width), [2, 1, 1]);
     }
 
     /// Where the first apex edge's support ends places the apex: the long flank's,
