@@ -218,6 +218,20 @@ impl Point {
             in_view: true,
         }
     }
+
+    /// The level outside the located step of a station of `edge`: its inside less
+    /// its step, grey levels.
+    fn outside(&self, edge: &RigidEdge) -> f64 {
+        self.inside - edge.polarity * self.step * edge.step
+    }
+}
+
+/// The mean level of `frame` over the square of side `2 MIDDLE_HALF_PX + 1` pixels
+/// centred on `centre`, its rows along the unit vector `dir`; `None` outside.
+fn square_mean(frame: &GrayImage, centre: [f64; 2], dir: [f64; 2]) -> Option<f64> {
+    let start = add(centre, scale(dir, -f64::from(MIDDLE_HALF_PX)));
+    let rows = 2 * MIDDLE_HALF_PX as usize + 1;
+    strip_mean(start, dir, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
 }
 
 /// A station's point against its edge at a pose: the residual (signed distance from
@@ -814,7 +828,7 @@ impl Fitter {
         for p in self.holding(t, pose).filter(|p| of(p.edge)) {
             let edge = &t.edges[p.edge];
             probe += p.inside;
-            around += p.inside - edge.polarity * p.step * edge.step;
+            around += p.outside(edge);
             n += 1;
         }
         (n > 0).then(|| Levels {
@@ -848,11 +862,7 @@ impl Fitter {
             let middle = add(from, scale(edge.normal, 0.5 * width));
             let dir = rotate(edge.normal, pose.psi);
             let centre = add(pose.apex, scale(rotate(middle, pose.psi), pose.scale));
-            let start = add(centre, scale(dir, -f64::from(MIDDLE_HALF_PX)));
-            let rows = 2 * MIDDLE_HALF_PX as usize + 1;
-            if let Some(level) =
-                strip_mean(start, dir, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
-            {
+            if let Some(level) = square_mean(frame, centre, dir) {
                 middles[n] = (levels.share(level), p.edge);
                 n += 1;
             }
@@ -874,7 +884,6 @@ impl Fitter {
     /// tip, its flanks and blunt end stepping as the needle's do (tool seed 7, frames
     /// without a tool).
     fn rim(&self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> Option<usize> {
-        let rows = 2 * MIDDLE_HALF_PX as usize + 1;
         (0..t.edges.len()).find(|&e| {
             let edge = &t.edges[e];
             let normal = rotate(edge.normal, pose.psi);
@@ -882,13 +891,10 @@ impl Fitter {
             let (mut rims, mut n) = (0, 0);
             for p in self.holding(t, pose).filter(|p| p.edge == e) {
                 let centre = add(p.at, scale(normal, -RIM_PX));
-                let start = add(centre, scale(across, -f64::from(MIDDLE_HALF_PX)));
-                let Some(far) =
-                    strip_mean(start, across, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
-                else {
+                let Some(far) = square_mean(frame, centre, across) else {
                     continue;
                 };
-                let outside = p.inside - edge.polarity * p.step * edge.step;
+                let outside = p.outside(edge);
                 n += 1;
                 if (far - outside) * edge.polarity > 0.5 * (p.inside - outside) * edge.polarity {
                     rims += 1;
