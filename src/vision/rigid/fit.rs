@@ -121,7 +121,8 @@ const SIGMA_FACTOR: f64 = 1.2;
 const APEX_STATIONS: usize = 3;
 const NEAREST_PX: f64 = 3.0;
 /// A corner station's inside within this share of the calibrated step of the probe's
-/// level carries the probe on.
+/// level carries the probe on; a level beyond it by more is no background
+/// ([`Fitter::covered`]).
 const COVERED_LEVEL: f64 = 0.25;
 /// Where the levels inside a corner and past the apex are read from, pixels: clear of
 /// the blur.
@@ -638,8 +639,8 @@ impl Fitter {
                 levels[..m].sort_by(f64::total_cmp);
                 inside[e] = levels[m / 2];
             }
-            // Stations under a particle across the edge (`covered`) neither hold nor
-            // miss it, once the edge shows itself on enough others; the median step
+            // Stations reading a particle across or beside the edge (`covered`) neither
+            // hold nor miss it, once the edge shows itself on enough others; the median step
             // still counts them, so an edge more than half covered is refused.
             let covered = if held >= MIN_IN_VIEW {
                 points()
@@ -904,14 +905,16 @@ impl Fitter {
         })
     }
 
-    /// Whether station `p` of `edge` lies under a body beyond the probe's level (brighter
-    /// than a brighter probe, darker than a darker one): its step the wrong way, its
-    /// inside more than [`COVERED_LEVEL`] of the step beyond `probe_level`, the level of
-    /// the edge's holding stations. The background lies on the other side of the
-    /// probe's level, so such a body is no background: a particle across the edge.
+    /// Whether station `p` of `edge` reads a body beyond the probe's level (brighter
+    /// than a brighter probe, darker than a darker one): its step the wrong way, the
+    /// level on its far side more than [`COVERED_LEVEL`] of the step beyond
+    /// `probe_level`, the level of the edge's holding stations. The background lies on
+    /// the other side of the probe's level, so such a body is no background: a particle
+    /// across the edge or beside it (tool seed 15: one beyond a gripper jaw's end face
+    /// turned 4 of its 13 stations).
     fn covered(edge: &RigidEdge, p: &Point, probe_level: f64) -> bool {
-        p.step <= -HOLD_SHARE
-            && (p.inside - probe_level) * edge.polarity > COVERED_LEVEL * edge.step
+        let outside = p.inside - edge.polarity * p.step * edge.step;
+        p.step <= -HOLD_SHARE && (outside - probe_level) * edge.polarity > COVERED_LEVEL * edge.step
     }
 
     /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
@@ -1286,25 +1289,34 @@ mod tests {
         assert!(matches!(refused(160.0), Some(Miss::WrongAppearance(_))));
     }
 
-    /// A particle brighter than a bright probe lying across part of its lower flank:
-    /// the stations under it step the wrong way from a level beyond the probe's, and
-    /// neither hold nor miss the flank, which its other stations show. A level at the
-    /// probe's there (a brighter background beside the flank) is no such body: those
-    /// stations miss it.
+    /// A particle brighter than a bright probe lying across or beside part of its
+    /// lower flank: the stations there step the wrong way to a level beyond the
+    /// probe's, and neither hold nor miss the flank, which its other stations show. A
+    /// level a fifth of the step beyond the probe's (a background about as bright as
+    /// the probe) is no such body: those stations miss it.
     #[test]
-    fn a_particle_across_an_edge_does_not_hide_it() {
+    fn a_particle_across_or_beside_an_edge_does_not_hide_it() {
         let (t, pose, frame) = needle_at_rest();
-        let with_stations = |inside: f64| {
+        let with_stations = |step: f64, inside: f64| {
             let mut f = fitter(&t, &pose, true);
             for p in f.points.iter_mut().filter(|p| p.edge == 2).skip(2).take(4) {
-                p.step = -1.5;
+                p.step = step;
                 p.inside = inside;
             }
             f
         };
-        assert_eq!(refusal(&mut with_stations(240.0), &t, pose, &frame), None);
+        // Across: both sides beyond the probe's level (180).
         assert_eq!(
-            refusal(&mut with_stations(180.0), &t, pose, &frame),
+            refusal(&mut with_stations(-1.5, 240.0), &t, pose, &frame),
+            None
+        );
+        // Beside: the probe's level inside, the particle outside.
+        assert_eq!(
+            refusal(&mut with_stations(-1.5, 180.0), &t, pose, &frame),
+            None
+        );
+        assert_eq!(
+            refusal(&mut with_stations(-0.2, 180.0), &t, pose, &frame),
             Some(Miss::EdgeMissing(t.edges[2].name))
         );
     }
