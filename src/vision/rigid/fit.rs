@@ -639,9 +639,10 @@ impl Fitter {
                 levels[..m].sort_by(f64::total_cmp);
                 inside[e] = levels[m / 2];
             }
-            // Stations reading a particle across or beside the edge (`covered`) neither
-            // hold nor miss it, once the edge shows itself on enough others; the median step
-            // still counts them, so an edge more than half covered is refused.
+            // Stations reading a particle across or beside the edge (`covered`)
+            // neither hold nor miss it, once the edge shows itself on enough others;
+            // the median step still counts them, so an edge more than half covered is
+            // refused.
             let covered = if held >= MIN_IN_VIEW {
                 points()
                     .filter(|p| {
