@@ -914,8 +914,8 @@ impl Fitter {
     /// across the edge or beside it (tool seed 15: one beyond a gripper jaw's end face
     /// turned 4 of its 13 stations).
     fn covered(edge: &RigidEdge, p: &Point, probe_level: f64) -> bool {
-        let outside = p.inside - edge.polarity * p.step * edge.step;
-        p.step <= -HOLD_SHARE && (outside - probe_level) * edge.polarity > COVERED_LEVEL * edge.step
+        p.step <= -HOLD_SHARE
+            && (p.outside(edge) - probe_level) * edge.polarity > COVERED_LEVEL * edge.step
     }
 
     /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
