@@ -85,6 +85,9 @@ pub struct Search {
     /// The last search's placements with the apex inside a run of the first apex
     /// edge ([`Search::placements_within_runs`]).
     within: Vec<Scored>,
+    /// Whether `within` holds the last search's scores (they do not depend on the
+    /// bodies ruled out, so a frame searched again with more of them reuses them).
+    within_scored: bool,
     /// Per voting edge, its gradient's direction in the reference (image angle).
     directions: [f64; 3],
     /// Gradient magnitude a pixel needs to vote or support.
@@ -187,6 +190,7 @@ impl Search {
             }
         }
         self.score(pyr, template, voting, bounds.scales, Apexes::RunEnds);
+        self.within_scored = false;
         self.select(pyr, excluded, out);
     }
 
@@ -197,7 +201,8 @@ impl Search {
     /// verified: a flank running on past the tip along a line of the background (a
     /// band, another body's outline of its direction) ends its run beyond the end
     /// face, and neither the run's end nor a line of the end face, too short to be
-    /// voted for, places the apex at the tip.
+    /// voted for, places the apex at the tip. They are scored once per search: a frame
+    /// searched again with more bodies ruled out reuses the scores.
     pub fn placements_within_runs(
         &mut self,
         pyr: &Pyramid,
@@ -207,14 +212,17 @@ impl Search {
         tried: &[Pose],
         out: &mut Vec<Pose>,
     ) {
-        let (all_voting, edges) = voting_edges(template);
-        self.score(
-            pyr,
-            template,
-            &all_voting[..edges],
-            bounds.scales,
-            Apexes::WithinRunsToo,
-        );
+        if !self.within_scored {
+            let (all_voting, edges) = voting_edges(template);
+            self.score(
+                pyr,
+                template,
+                &all_voting[..edges],
+                bounds.scales,
+                Apexes::WithinRunsToo,
+            );
+            self.within_scored = true;
+        }
         select_from(&self.within, pyr, excluded, out);
         out.retain(|p| !tried.contains(p));
     }
@@ -536,11 +544,18 @@ impl Support {
 
     /// Whether the detection pixel nearest `p` supports the edge (false outside).
     fn at(&self, pyr: &Pyramid, p: [f64; 2]) -> bool {
-        let (x, y) = (p[0].round(), p[1].round());
-        if !(x >= 0.0 && y >= 0.0 && x < pyr.width as f64 && y < pyr.height as f64) {
+        // Rounded by truncating the shifted, non-negative coordinates: the search
+        // asks this for every pixel along every line it places, where `round` (a
+        // libm call) took a sixth of a search's time (perf).
+        let (x, y) = (p[0] + 0.5, p[1] + 0.5);
+        if !(x >= 0.0 && y >= 0.0) {
             return false;
         }
-        let i = y as usize * pyr.width + x as usize;
+        let (x, y) = (x as usize, y as usize);
+        if x >= pyr.width || y >= pyr.height {
+            return false;
+        }
+        let i = y * pyr.width + x;
         pyr.mag[i] >= self.threshold
             && pyr.gx[i] * self.cos + pyr.gy[i] * self.sin
                 >= self.min_dot * pyr.mag[i] / self.threshold
