@@ -67,7 +67,14 @@ const VOTES_PER_PIXEL: f32 = 2.0;
 struct Scored {
     pose: Pose,
     votes: f32,
+    /// Where the search made it (rotation bin, line, apex): placements of equal
+    /// votes rank in this order.
+    order: u32,
 }
+
+/// Apexes a search makes on one line of the first apex edge: its run's end, one
+/// inside its runs, and one where each line of the other apex edge crosses it.
+const APEXES_PER_LINE: usize = 2 + LINES_PER_BIN;
 
 /// The accumulators of the search, reused from frame to frame.
 #[derive(Debug, Default)]
@@ -242,9 +249,9 @@ impl Search {
         template: &RigidTemplate,
         voting: &[usize],
         scales: ScaleRange,
-        apexes: Apexes,
+        apexes_made: Apexes,
     ) {
-        let scored = match apexes {
+        let scored = match apexes_made {
             Apexes::RunEnds => &mut self.scored,
             Apexes::WithinRunsToo => &mut self.within,
         };
@@ -287,32 +294,42 @@ impl Search {
                     ),
                 )
             });
-            for &(ra, _) in a.iter().flatten() {
+            let lines = a
+                .iter()
+                .enumerate()
+                .filter_map(|(k, p)| p.map(|(r, _)| (k, r)));
+            for (k, ra) in lines {
                 // The apex where the first apex edge's support ends, and where each of
-                // the second's lines crosses it.
-                let along_run = run_end(
-                    pyr,
-                    &line(0, ra),
-                    self.centre,
-                    &first_face.supports,
-                    toward,
-                    &end_face,
-                );
-                let within_run = match apexes {
-                    Apexes::RunEnds => None,
-                    Apexes::WithinRunsToo => within_runs(
-                        pyr,
-                        &line(0, ra),
-                        self.centre,
-                        &first_face.supports,
-                        &end_face,
-                    ),
-                };
-                let crossings = b
-                    .iter()
-                    .flatten()
-                    .filter_map(|&(rb, _)| line(0, ra).intersect(&line(1, rb)));
-                for apex in along_run.into_iter().chain(within_run).chain(crossings) {
+                // the second's lines crosses it; or, with apexes inside runs too, only
+                // the one inside a run (the others are the last search's, added below).
+                let mut apexes = [None; APEXES_PER_LINE];
+                match apexes_made {
+                    Apexes::RunEnds => {
+                        apexes[0] = run_end(
+                            pyr,
+                            &line(0, ra),
+                            self.centre,
+                            &first_face.supports,
+                            toward,
+                            &end_face,
+                        );
+                        for (slot, p) in apexes[2..].iter_mut().zip(&b) {
+                            *slot = p.and_then(|(rb, _)| line(0, ra).intersect(&line(1, rb)));
+                        }
+                    }
+                    Apexes::WithinRunsToo => {
+                        apexes[1] = within_runs(
+                            pyr,
+                            &line(0, ra),
+                            self.centre,
+                            &first_face.supports,
+                            &end_face,
+                        );
+                    }
+                }
+                let made = apexes.iter().enumerate();
+                for (slot, apex) in made.filter_map(|(slot, p)| p.map(|p| (slot, p))) {
+                    let order = ((i * LINES_PER_BIN + k) * APEXES_PER_LINE + slot) as u32;
                     let apex_det = [apex[0] + self.centre[0], apex[1] + self.centre[1]];
                     if !(apex_det[0] >= 0.0
                         && apex_det[1] >= 0.0
@@ -361,11 +378,19 @@ impl Search {
                             apex: pyr.to_frame(apex_det),
                         },
                         votes: va + vb + vc,
+                        order,
                     });
                 }
             }
         }
-        scored.sort_by(|x, y| y.votes.total_cmp(&x.votes));
+        if apexes_made == Apexes::WithinRunsToo {
+            self.within.extend_from_slice(&self.scored);
+        }
+        let scored = match apexes_made {
+            Apexes::RunEnds => &mut self.scored,
+            Apexes::WithinRunsToo => &mut self.within,
+        };
+        scored.sort_by(|x, y| y.votes.total_cmp(&x.votes).then(x.order.cmp(&y.order)));
     }
 }
 
