@@ -809,6 +809,72 @@ mod tests {
         assert_eq!([1, 2, 4].map(flank_half_width), [2, 1, 1]);
     }
 
+    /// A needle's template (12 px thick, end face 12 px) searched on two bright
+    /// needles, one whose upper flank runs on along a band past its end face, beside
+    /// particles and scratches: the second round adds the apexes inside runs to the
+    /// first round's placements, which keep their votes and their order (equal votes,
+    /// as at a needle's tip where its run ends and the end face crosses, in the order
+    /// they were made), and searching again with a body ruled out reuses the scores.
+    #[test]
+    fn the_second_round_keeps_the_first_rounds_placements_in_their_order() {
+        let frame = GrayImage::from_fn(240, 160, |x, y| {
+            let needle = (20..150).contains(&x) && (40..52).contains(&y)
+                || (20..110).contains(&x) && (100..112).contains(&y);
+            let band = (150..200).contains(&x) && (40..42).contains(&y);
+            let particle = (x as i32 - 60).pow(2) + (y as i32 - 140).pow(2) < 64
+                || (x as i32 - 190).pow(2) + (y as i32 - 110).pow(2) < 36;
+            let scratch = (x + y) % 37 == 0 && y > 130;
+            let level = if needle || band || particle || scratch {
+                200
+            } else {
+                50
+            };
+            image::Luma([level])
+        });
+        let mut pyr = Pyramid::default();
+        pyr.build_binned(&frame, 1);
+        let template = crate::vision::rigid::needle_template();
+        let bounds = Bounds {
+            window_rad: 20f64.to_radians(),
+            scales: ScaleRange { lo: 0.8, hi: 1.25 },
+        };
+        let none = [None; 3];
+        let (mut search, mut out) = (Search::default(), Vec::new());
+        search.placements(&pyr, &template, &bounds, &none, &mut out);
+        let first: Vec<(Pose, f32)> = search.scored.iter().map(|s| (s.pose, s.votes)).collect();
+        assert!(first.len() > MAX_PLACEMENTS, "{}", first.len());
+        search.placements_within_runs(&pyr, &template, &bounds, &none, &[], &mut out);
+        let within_run = |s: &&Scored| s.order as usize % APEXES_PER_LINE == 1;
+        let kept: Vec<(Pose, f32)> = (search.within.iter())
+            .filter(|s| !within_run(s))
+            .map(|s| (s.pose, s.votes))
+            .collect();
+        assert_eq!(kept, first);
+        assert!(search.within.iter().any(|s| within_run(&s)));
+        // Best first; of equal votes, the first made first, as one whole scoring
+        // of both rounds would rank them.
+        let ranked = |w: &[Scored]| {
+            w[0].votes > w[1].votes || (w[0].votes == w[1].votes && w[0].order < w[1].order)
+        };
+        assert!(search.within.windows(2).all(ranked));
+        let ties = search.within.windows(2);
+        assert!(ties.filter(|w| w[0].votes == w[1].votes).count() > 0);
+        // Ruling out the best placement's apex chooses from the same scores.
+        let scores: Vec<(Pose, f32)> = search.within.iter().map(|s| (s.pose, s.votes)).collect();
+        let best = crate::vision::Estimate {
+            detected: true,
+            apex_px: Some(out[0].apex),
+            ..crate::vision::Estimate::missed(crate::vision::Miss::NoCandidates, 0.0)
+        };
+        let ruled_out = [Claim::of(&best), None, None];
+        let mut again = Vec::new();
+        search.placements_within_runs(&pyr, &template, &bounds, &ruled_out, &[], &mut again);
+        let rescored: Vec<(Pose, f32)> = search.within.iter().map(|s| (s.pose, s.votes)).collect();
+        assert_eq!(rescored, scores);
+        assert!(!again.is_empty() && !again.contains(&out[0]));
+        assert!(again.iter().all(|p| !claimed(&ruled_out, p.apex)));
+    }
+
     /// Where the first apex edge's support ends places the apex: the long flank's,
     /// not the short end face's, whichever the configuration names first.
     #[test]
