@@ -8,7 +8,7 @@
 //! least that bright. Every kept pixel remembers its sub-pixel position and gradient
 //! direction, which is what lets the Hough stage check polarity.
 
-use super::geometry::{truncate_index, wrap_pi};
+use super::geometry::{nearest_pixel, truncate_index, wrap_pi};
 use super::pyramid::Pyramid;
 use super::simd::dispatch;
 
@@ -214,13 +214,11 @@ impl EdgeMap {
     /// a pixel of `p` across the line of unit normal `normal`.
     pub fn supports(&self, p: [f64; 2], normal: [f64; 2], normal_angle: f64, tol: f64) -> bool {
         for k in [-1.0, 0.0, 1.0] {
-            let x = p[0] + k * normal[0] + 0.5;
-            let y = p[1] + k * normal[1] + 0.5;
-            if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
+            let q = [p[0] + k * normal[0], p[1] + k * normal[1]];
+            let Some(i) = nearest_pixel(q, self.width, self.height) else {
                 continue;
-            }
-            // Non-negative: truncation rounds (f64::round is a libm call on x86-64).
-            let code = self.direction[y as usize * self.width + x as usize];
+            };
+            let code = self.direction[i];
             if code != 0 && wrap_pi(code_angle(code) as f64 - normal_angle).abs() < tol {
                 return true;
             }

@@ -25,6 +25,19 @@ pub fn truncate_index(v: f32) -> usize {
     v as i32 as usize
 }
 
+/// The row-major index of the pixel nearest `p` in an image `width` x `height`, if it
+/// lies inside. Rounded by truncating the shifted coordinates, non-negative once
+/// checked: `f64::round` is a libm call on x86-64, and this runs for every pixel the
+/// tracker samples along a line.
+#[inline(always)]
+pub fn nearest_pixel(p: [f64; 2], width: usize, height: usize) -> Option<usize> {
+    let (x, y) = (p[0] + 0.5, p[1] + 0.5);
+    if !(x >= 0.0 && y >= 0.0 && x < width as f64 && y < height as f64) {
+        return None;
+    }
+    Some(y as usize * width + x as usize)
+}
+
 /// Wraps an angle to (-pi, pi]. Inputs are differences of angles, a turn or two at
 /// most, so a loop beats the remainder (a libm call).
 pub fn wrap_pi(angle_rad: f64) -> f64 {
@@ -237,6 +250,18 @@ mod tests {
         let d = rotate([1.0, 0.0], image_rad_from_screen_deg(10.0));
         assert!(d[0] > 0.98 && d[1] < -0.17 && d[1] > -0.18, "{d:?}");
         assert!((screen_deg_from_image_rad(image_rad_from_screen_deg(7.5)) - 7.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_nearest_pixel_is_found_inside_the_image_only() {
+        // 4 x 3: the nearest pixel rounds halves up, and within half a pixel of the
+        // border a point is still inside.
+        assert_eq!(nearest_pixel([1.49, 0.5], 4, 3), Some(4 + 1));
+        assert_eq!(nearest_pixel([-0.49, 2.49], 4, 3), Some(2 * 4));
+        assert_eq!(nearest_pixel([3.49, 0.0], 4, 3), Some(3));
+        for outside in [[-0.51, 1.0], [3.5, 1.0], [1.0, 2.5], [f64::NAN, 1.0]] {
+            assert_eq!(nearest_pixel(outside, 4, 3), None, "{outside:?}");
+        }
     }
 
     #[test]

@@ -14,7 +14,9 @@
 
 use super::{Bounds, Pose, RigidEdge, RigidTemplate};
 use crate::vision::claim::{claimed, Claim};
-use crate::vision::geometry::{add, clip_to_rect, rotate, scale, sub, truncate_index, Line};
+use crate::vision::geometry::{
+    add, clip_to_rect, nearest_pixel, rotate, scale, sub, truncate_index, Line,
+};
 use crate::vision::pyramid::Pyramid;
 use crate::vision::ScaleRange;
 
@@ -569,18 +571,9 @@ impl Support {
 
     /// Whether the detection pixel nearest `p` supports the edge (false outside).
     fn at(&self, pyr: &Pyramid, p: [f64; 2]) -> bool {
-        // Rounded by truncating the shifted, non-negative coordinates: the search
-        // asks this for every pixel along every line it places, where `round` (a
-        // libm call) took a sixth of a search's time (perf).
-        let (x, y) = (p[0] + 0.5, p[1] + 0.5);
-        if !(x >= 0.0 && y >= 0.0) {
+        let Some(i) = nearest_pixel(p, pyr.width, pyr.height) else {
             return false;
-        }
-        let (x, y) = (x as usize, y as usize);
-        if x >= pyr.width || y >= pyr.height {
-            return false;
-        }
-        let i = y * pyr.width + x;
+        };
         pyr.mag[i] >= self.threshold
             && pyr.gx[i] * self.cos + pyr.gy[i] * self.sin
                 >= self.min_dot * pyr.mag[i] / self.threshold
