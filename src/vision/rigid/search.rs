@@ -301,32 +301,20 @@ impl Search {
                 .enumerate()
                 .filter_map(|(k, p)| p.map(|(r, _)| (k, r)));
             for (k, ra) in lines {
+                let (flank, supports) = (line(0, ra), &first_face.supports);
                 // The apex where the first apex edge's support ends, and where each of
                 // the second's lines crosses it; or, with apexes inside runs too, only
                 // the one inside a run (the others are the last search's, added below).
                 let mut apexes = [None; APEXES_PER_LINE];
                 match apexes_made {
                     Apexes::RunEnds => {
-                        apexes[0] = run_end(
-                            pyr,
-                            &line(0, ra),
-                            self.centre,
-                            &first_face.supports,
-                            toward,
-                            &end_face,
-                        );
+                        apexes[0] = run_end(pyr, &flank, self.centre, supports, toward, &end_face);
                         for (slot, p) in apexes[2..].iter_mut().zip(&b) {
-                            *slot = p.and_then(|(rb, _)| line(0, ra).intersect(&line(1, rb)));
+                            *slot = p.and_then(|(rb, _)| flank.intersect(&line(1, rb)));
                         }
                     }
                     Apexes::WithinRunsToo => {
-                        apexes[1] = within_runs(
-                            pyr,
-                            &line(0, ra),
-                            self.centre,
-                            &first_face.supports,
-                            &end_face,
-                        );
+                        apexes[1] = within_runs(pyr, &flank, self.centre, supports, &end_face);
                     }
                 }
                 let made = apexes.iter().enumerate();
