@@ -1,64 +1,30 @@
-//! The fit of a rigid probe's pose on the full-resolution grey levels, and its
-//! verification.
-//!
-//! Stations along every edge of the template, placed by the current pose, locate the
-//! edge's step within a reach that shrinks pass by pass (8, 4, 2.5, 2 px); the pose
-//! (rotation, apex, scale) is then solved by Gauss-Newton on the points' distances to
-//! their edges' lines, with Huber weights. The rotation's standard error is the
-//! solution's covariance from the weighted residuals, times a factor measured on the
-//! rendered suites, combined with the reference's own.
-//!
-//! Verification then asks of the last pass's stations what `super` promises: every
-//! edge in view holds its calibrated step at [`HELD_SHARE`] of its stations (all but
-//! one of three) and at the apex, its median station holds it, the probe's sides of
-//! the edges are one body ([`ONE_BODY_SHARE`]), no edge runs on past an end where the
-//! reference shows it ending, and the apex, rotation and scale lie in range.
+//! The verification of a fit: what the last pass's stations must show for the frame
+//! to show this probe. Every edge in view holds its calibrated step at
+//! [`HELD_SHARE`] of its stations (all but one of three) and at the apex, its median
+//! station holds it, the probe's sides of the edges are one body
+//! ([`ONE_BODY_SHARE`]), no edge runs on past an end where the reference shows it
+//! ending, the body is neither hollow nor a rim around a line of the background, and
+//! the apex, rotation and scale lie in range.
 
 use image::GrayImage;
-use nalgebra::{Matrix4, Vector4};
 
-use super::station::{Located, Stations};
-use super::{Bounds, Pose, RigidEdge, RigidTemplate};
-use crate::vision::geometry::{add, along, bilinear, dot, rotate, scale, strip_mean, sub};
+use super::{
+    Fit, Fitter, Point, Seen, BEYOND_PX, HELD_SHARE, IN_VIEW_SHARE, MAX_EDGES, MAX_STATIONS,
+    MIN_IN_VIEW, REACHES, STEP_SHARE,
+};
+use crate::vision::geometry::{add, along, bilinear, dot, rotate, scale, strip_mean};
+use crate::vision::rigid::{Pose, RigidEdge, RigidTemplate};
 use crate::vision::stations::{COVERED_APEX_SHARE, PAST_APEX_HALF_PX};
 use crate::vision::Miss;
 
-/// Most edges a rigid template may have.
-pub const MAX_EDGES: usize = 8;
-/// Reach of the passes, frame pixels.
-const REACHES: [f64; 4] = [8.0, 4.0, 2.5, 2.0];
-/// Gauss-Newton steps per pass.
-const STEPS_PER_PASS: usize = 2;
-/// Station spacing along an edge, frame pixels, and the most stations per edge.
-const SPACING_PX: f64 = 5.0;
-pub(super) const MAX_STATIONS: usize = 48;
-
-/// Stations one per [`SPACING_PX`] along `length_px` frame pixels of an edge, both
-/// ends included (before the bounds a pass puts on them).
-pub(super) fn stations_along(length_px: f64) -> usize {
-    (length_px / SPACING_PX).floor() as usize + 1
-}
-/// Passes reaching farther than this (frame pixels) read at most [`COARSE_STATIONS`]
-/// per edge: they only bring the pose within the fine passes' reach.
-const FINE_REACH_PX: f64 = 3.0;
-const COARSE_STATIONS: usize = 12;
-/// Stations keep this far from an edge's closed ends, frame pixels (the blurred
-/// corner belongs to both edges).
-const CORNER_PX: f64 = 3.0;
-/// A station enters the fit when it steps by this share of the calibrated step.
-const FIT_SHARE: f64 = 0.2;
 /// A station holds the edge when it steps by this share of the calibrated step within
 /// [`HELD_PX`] of the fitted line, as an AFM pyramid's station shows its edge: a
 /// hidden or absent edge steps by nothing, and an end face over a band of a real
 /// background nearly as bright as the probe by 0.15-0.25.
-const HOLD_SHARE: f64 = 0.1;
-/// A station steps as its edge does, while the fit converges and at the apex's
-/// corner, when it steps by this share of the calibrated step: the corner tells a
-/// tip from a body that only looks like it, and asking [`HOLD_SHARE`] there let a
-/// dark lever's template through on the dark gap of a rail in a real background
-/// (tool seed 7).
-const STEP_SHARE: f64 = 0.2;
+pub(super) const HOLD_SHARE: f64 = 0.1;
+
 const HELD_PX: f64 = 1.5;
+
 /// A station stepping by less than this share of the calibrated step, off its line at
 /// the apex's corner, is read again centred on the line ([`Fitter::shown_off`]). A
 /// stronger step lies where the frame puts it: a gripper jaw's end laid along a
@@ -78,20 +44,7 @@ const CLOSING_SHARE: f64 = 0.5;
 /// the other apex edge does not close: an edge stepping by less next to the apex is
 /// held by noise-sized steps, which the stations past it would match by chance.
 const MIN_RUN_ON_YARDSTICK: f64 = 0.5;
-/// Share of an edge's stations in view that must hold it.
-pub const HELD_SHARE: f64 = 0.7;
-/// After the second pass, a placement whose stations hold less than this share in all
-/// is abandoned.
-const ABANDON_SHARE: f64 = 0.4;
-/// An edge is in view when at least this many of its stations are, and this share.
-const MIN_IN_VIEW: usize = 3;
-const IN_VIEW_SHARE: f64 = 0.25;
-/// Stations checked beyond a closed end, at these distances past it, frame pixels;
-/// all of them holding means the edge runs on (a particle beside the corner makes
-/// two of them step on the line's side under noise; an edge that goes on makes all).
-const BEYOND_PX: [f64; 3] = [4.0, 8.0, 12.0];
-/// Floor of the residuals' scale in the Huber weights, pixels.
-const MIN_SCALE_PX: f64 = 0.2;
+
 /// An edge whose located steps run along this many frame pixels or more ...
 const MIN_TURN_SPAN_PX: f64 = 100.0;
 /// ... and lie on a line turned from the fitted edge by more than this, degrees, bounds
@@ -104,13 +57,8 @@ const MAX_TURN_DEG: f64 = 1.0;
 /// A fit whose rotation's standard error exceeds this, degrees, is refused
 /// (`low-confidence`): its edges do not agree on the rotation to the accuracy
 /// detections are held to (docs/tracker.md, "Accuracy": at most 0.3 deg off).
-const MAX_SIGMA_DEG: f64 = 0.3;
-/// Huber's constant, in units of the residuals' robust scale.
-const HUBER_K: f64 = 1.5;
-/// Ratio of the measured rotation error to the fit's covariance: neighbouring
-/// stations' runs overlap and the blur correlates them (measured on the rendered
-/// suites, tests/rigid_probes.rs).
-const SIGMA_FACTOR: f64 = 1.2;
+pub(super) const MAX_SIGMA_DEG: f64 = 0.3;
+
 /// Apex stations: of the stations nearest the apex on each apex edge, all but one must
 /// show it (a tip hidden under a particle at the probe's level shows none; noise can
 /// drop one; a tip touching a brighter particle shows its outline stepping the other
@@ -164,100 +112,12 @@ impl Levels {
     }
 }
 
-/// One edge as a fit saw it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Seen {
-    /// Positions along the edge (reference pixels) of its first and last station in
-    /// view.
-    pub span: [f64; 2],
-    pub held: usize,
-    /// Median step of its stations, grey levels.
-    pub step: f64,
-}
-
-/// A verified fit.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Fit {
-    pub pose: Pose,
-    pub angle_sigma_rad: f64,
-    /// The least share of held stations over the edges in view.
-    pub confidence: f64,
-    pub edges: [Option<Seen>; MAX_EDGES],
-}
-
-/// A station's reading.
-#[derive(Debug, Clone, Copy)]
-struct Point {
-    edge: usize,
-    tau: f64,
-    /// The located step's point, frame pixels.
-    at: [f64; 2],
-    step: f64,
-    /// Mean level on the probe's side of the located step.
-    inside: f64,
-    /// The step was found (inside the frame); else the station is out of view.
-    in_view: bool,
-}
-
-impl Point {
-    /// The reading of a station at `q` (normal `normal`) that found step `f`, over the
-    /// edge's calibrated `step`.
-    fn located(
-        edge: usize,
-        tau: f64,
-        q: [f64; 2],
-        normal: [f64; 2],
-        f: Located,
-        step: f64,
-    ) -> Point {
-        Point {
-            edge,
-            tau,
-            at: add(q, scale(normal, f.t)),
-            step: f.step / step,
-            inside: f.inside,
-            in_view: true,
-        }
-    }
-
-    /// The level outside the located step of a station of `edge`: its inside less
-    /// its step, grey levels.
-    fn outside(&self, edge: &RigidEdge) -> f64 {
-        self.inside - edge.polarity * self.step * edge.step
-    }
-}
-
 /// The mean level of `frame` over the square of side `2 MIDDLE_HALF_PX + 1` pixels
 /// centred on `centre`, its rows along the unit vector `dir`; `None` outside.
 fn square_mean(frame: &GrayImage, centre: [f64; 2], dir: [f64; 2]) -> Option<f64> {
     let start = add(centre, scale(dir, -f64::from(MIDDLE_HALF_PX)));
     let rows = 2 * MIDDLE_HALF_PX as usize + 1;
     strip_mean(start, dir, rows, MIDDLE_HALF_PX, |q| bilinear(frame, q))
-}
-
-/// A station's point against its edge at a pose: the residual (signed distance from
-/// the bowed edge), and what its derivatives need: the edge's normal in the frame, the
-/// point from the apex, the edge's depth there in reference pixels.
-struct Against {
-    residual: f64,
-    normal: [f64; 2],
-    from_apex: [f64; 2],
-    depth: f64,
-}
-
-impl Against {
-    fn new(t: &RigidTemplate, pose: &Pose, p: &Point) -> Against {
-        let edge = &t.edges[p.edge % MAX_EDGES];
-        let normal = rotate(edge.normal, pose.psi);
-        let from_apex = sub(p.at, pose.apex);
-        let depth = edge.offset + edge.bow_at(p.tau);
-        Against {
-            residual: dot(normal, from_apex) - pose.scale * depth,
-            normal,
-            from_apex,
-            depth,
-        }
-    }
 }
 
 /// The distance (reference pixels) from `from`, on edge `e`, along its inward normal
@@ -337,255 +197,9 @@ fn median_step<'a>(points: impl Iterator<Item = &'a Point>) -> f64 {
     steps[n / 2]
 }
 
-/// Fits poses; keeps its buffers between calls.
-#[derive(Debug, Default)]
-pub struct Fitter {
-    stations: Stations,
-    points: Vec<Point>,
-    residuals: Vec<f64>,
-    /// Whether both apex edges must show the corner: on a reference, where nothing
-    /// touches the tip and a misplaced tip point must not verify.
-    pub(super) whole_corner: bool,
-}
-
 impl Fitter {
-    /// The verified fit of `template` from `start`, or the refusal and how much of the
-    /// probe the frame showed.
-    pub fn fit(
-        &mut self,
-        frame: &GrayImage,
-        template: &RigidTemplate,
-        start: Pose,
-        bounds: &Bounds,
-    ) -> Result<Fit, (Miss, f64)> {
-        let mut pose = start;
-        let mut covariance = Matrix4::zeros();
-        for (pass, &reach) in REACHES.iter().enumerate() {
-            let stations = if reach > FINE_REACH_PX {
-                COARSE_STATIONS
-            } else {
-                MAX_STATIONS
-            };
-            self.read(frame, template, &pose, reach, stations, false);
-            if pass == 1 {
-                let (held, total) = self.held();
-                if total == 0 || (held as f64) < ABANDON_SHARE * total as f64 {
-                    return Err((Miss::Inconsistent, held as f64 / total.max(1) as f64));
-                }
-            }
-            for _ in 0..STEPS_PER_PASS {
-                let Some((next, cov)) = self.solve(template, &pose) else {
-                    return Err((Miss::Inconsistent, 0.0));
-                };
-                pose = next;
-                covariance = cov;
-            }
-            if !bounds.scales.contains(pose.scale) {
-                return Err((Miss::ScaleMismatch, 0.0));
-            }
-        }
-        self.read(
-            frame,
-            template,
-            &pose,
-            REACHES[REACHES.len() - 1],
-            MAX_STATIONS,
-            true,
-        );
-        self.read_short_edges_at_line(frame, template, &pose);
-        let sigma =
-            (covariance[(0, 0)].max(0.0).sqrt() * SIGMA_FACTOR).hypot(template.angle_sigma_rad);
-        self.verify(frame, template, pose, sigma, bounds.window_rad)
-    }
-
-    /// Reads every edge's stations at `pose`; with `beyond`, also the stations past
-    /// each closed end (edge index offset by [`MAX_EDGES`]).
-    fn read(
-        &mut self,
-        frame: &GrayImage,
-        t: &RigidTemplate,
-        pose: &Pose,
-        reach: f64,
-        most: usize,
-        beyond: bool,
-    ) {
-        self.points.clear();
-        for (e, edge) in t.edges.iter().enumerate() {
-            let normal = rotate(edge.normal, pose.psi);
-            let margin = CORNER_PX / pose.scale;
-            let lo = edge.extent[0] + if edge.open[0] { 0.0 } else { margin };
-            let hi = edge.extent[1] - if edge.open[1] { 0.0 } else { margin };
-            if hi <= lo {
-                continue;
-            }
-            let count = stations_along((hi - lo) * pose.scale).clamp(MIN_IN_VIEW, most);
-            for k in 0..count {
-                let tau = lo + (hi - lo) * k as f64 / (count - 1) as f64;
-                let q = pose.place(edge, tau);
-                let found = self.stations.locate(frame, q, normal, edge.polarity, reach);
-                self.points.push(match found {
-                    Some(f) => Point::located(e, tau, q, normal, f, edge.step),
-                    None => Point {
-                        edge: e,
-                        tau,
-                        at: q,
-                        step: 0.0,
-                        inside: f64::NAN,
-                        in_view: false,
-                    },
-                });
-            }
-            if !beyond {
-                continue;
-            }
-            for (end, sign) in [(0, -1.0), (1, 1.0)] {
-                if edge.open[end] {
-                    continue;
-                }
-                for d in BEYOND_PX {
-                    let tau = edge.extent[end] + sign * d / pose.scale;
-                    let q = pose.place(edge, tau);
-                    if let Some(f) = self.stations.locate(frame, q, normal, edge.polarity, reach) {
-                        self.points.push(Point::located(
-                            MAX_EDGES + e,
-                            tau,
-                            q,
-                            normal,
-                            f,
-                            edge.step,
-                        ));
-                    }
-                }
-            }
-        }
-    }
-
-    /// Reads again, centred on its line at `pose`, each station in view that does not
-    /// hold an edge of so few stations that two of them decide it (a blunt end), and
-    /// keeps the new reading where it holds. A station finds its step at the largest
-    /// one-pixel rise within its reach, which noise as large as the step moves by
-    /// pixels; centred on the line, the step is placed by its area between the levels
-    /// either side alone. A long edge's share holds through such stations; a short
-    /// one's does not.
-    fn read_short_edges_at_line(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) {
-        for e in 0..t.edges.len() {
-            let n = self
-                .points
-                .iter()
-                .filter(|p| p.edge == e && p.in_view)
-                .count();
-            if n == 0 || (n - n.min(2)) as f64 >= HELD_SHARE * n as f64 {
-                continue;
-            }
-            for i in 0..self.points.len() {
-                let p = self.points[i];
-                if p.edge != e || !p.in_view || Self::holds_final(t, pose, &p) {
-                    continue;
-                }
-                let again = self.read_again(frame, t, pose, &p, 1.0, 0.0);
-                if let Some(again) = again.filter(|q| Self::holds_final(t, pose, q)) {
-                    self.points[i] = again;
-                }
-            }
-        }
-    }
-
-    /// Station `p` of an edge read again from its place on the edge at `pose`: the
-    /// step of `polarity` times the edge's within `reach` pixels of the line (with
-    /// `reach` 0, centred on it).
-    fn read_again(
-        &mut self,
-        frame: &GrayImage,
-        t: &RigidTemplate,
-        pose: &Pose,
-        p: &Point,
-        polarity: f64,
-        reach: f64,
-    ) -> Option<Point> {
-        let edge = &t.edges[p.edge];
-        let normal = rotate(edge.normal, pose.psi);
-        let q = pose.place(edge, p.tau);
-        self.stations
-            .locate(frame, q, normal, polarity * edge.polarity, reach)
-            .map(|f| Point::located(p.edge, p.tau, q, normal, f, edge.step))
-    }
-
-    /// Signed distance of a station's point from its edge's line at `pose`.
-    fn residual(t: &RigidTemplate, pose: &Pose, p: &Point) -> f64 {
-        Against::new(t, pose, p).residual
-    }
-
-    /// Stations stepping as their edge does (before the fit has converged: wherever
-    /// within the reach), and stations in view.
-    fn held(&self) -> (usize, usize) {
-        let in_view = self.points.iter().filter(|p| p.in_view);
-        let held = in_view.clone().filter(|p| p.step >= STEP_SHARE).count();
-        (held, in_view.count())
-    }
-
-    /// One Gauss-Newton step with Huber weights; the new pose and the covariance of the
-    /// parameters (psi, apex x, apex y, scale).
-    fn solve(&mut self, t: &RigidTemplate, pose: &Pose) -> Option<(Pose, Matrix4<f64>)> {
-        self.residuals.clear();
-        for p in &self.points {
-            if p.in_view && p.step >= FIT_SHARE {
-                self.residuals.push(Self::residual(t, pose, p).abs());
-            }
-        }
-        let n = self.residuals.len();
-        if n < 6 {
-            return None;
-        }
-        self.residuals.sort_by(f64::total_cmp);
-        let scale_px = (1.4826 * self.residuals[n / 2]).max(MIN_SCALE_PX);
-        let k = HUBER_K * scale_px;
-        let mut normal_matrix = Matrix4::<f64>::zeros();
-        let mut rhs = Vector4::<f64>::zeros();
-        let mut weighted_sq = 0.0;
-        let mut weight_sum = 0.0;
-        for p in &self.points {
-            if !(p.in_view && p.step >= FIT_SHARE) {
-                continue;
-            }
-            let Against {
-                residual: r,
-                normal,
-                from_apex: d,
-                depth,
-            } = Against::new(t, pose, p);
-            let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
-            let j = Vector4::new(
-                -normal[1] * d[0] + normal[0] * d[1],
-                -normal[0],
-                -normal[1],
-                -depth,
-            );
-            normal_matrix += w * j * j.transpose();
-            rhs += w * r * j;
-            weighted_sq += w * r * r;
-            weight_sum += w;
-        }
-        if normal_matrix[(3, 3)] < 1e-6 {
-            // No edge off the apex: the scale is not observed; hold it.
-            normal_matrix[(3, 3)] = 1.0;
-        }
-        let inverse = normal_matrix.try_inverse()?;
-        let delta = -inverse * rhs;
-        let dof = (weight_sum - 4.0).max(1.0);
-        let variance = weighted_sq / dof;
-        let next = Pose {
-            psi: pose.psi + delta[0],
-            apex: [pose.apex[0] + delta[1], pose.apex[1] + delta[2]],
-            scale: pose.scale + delta[3],
-        };
-        if !(next.psi.is_finite() && next.scale.is_finite() && next.scale > 0.0) {
-            return None;
-        }
-        Some((next, inverse * variance))
-    }
-
     /// The verdict on the last read's stations at `pose`.
-    fn verify(
+    pub(super) fn verify(
         &mut self,
         frame: &GrayImage,
         t: &RigidTemplate,
@@ -772,7 +386,7 @@ impl Fitter {
     /// the probe's level or beyond it. A patch at the probe's level over the tip
     /// still reads as the probe past the apex, and a patch beyond it over the tip
     /// hides both apex edges' corners, which is refused before this is asked.
-    fn particle_beside_tip(
+    pub(super) fn particle_beside_tip(
         &self,
         frame: &GrayImage,
         t: &RigidTemplate,
@@ -920,7 +534,7 @@ impl Fitter {
 
     /// Whether station `p` holds its edge: a step of [`HOLD_SHARE`] of the edge's
     /// within [`HELD_PX`] of it.
-    fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
+    pub(super) fn holds_final(t: &RigidTemplate, pose: &Pose, p: &Point) -> bool {
         Self::off_at(t, pose, p, HOLD_SHARE) <= HELD_PX
     }
 
@@ -1011,7 +625,7 @@ impl Fitter {
     /// `level` on its side (the edge's holding stations'): the probe's body runs on. A
     /// particle beside the corner of another level (brighter than a bright probe)
     /// steps on the line's side too, but is not the probe.
-    fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize, level: f64) -> bool {
+    pub(super) fn runs_on(&self, t: &RigidTemplate, pose: &Pose, e: usize, level: f64) -> bool {
         let edge = &t.edges[e];
         let probe_level = |p: &Point| {
             level.is_nan() || (p.inside - level).abs() <= ONE_BODY_SHARE * edge.step.abs()
@@ -1058,301 +672,5 @@ impl Fitter {
             return RUN_ON_SHARE;
         }
         RUN_ON_SHARE * own.clamp(MIN_RUN_ON_YARDSTICK, 1.0)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Stations along every edge, each holding its step where the pose puts it, the
-    /// lower flank's in view or not.
-    fn fitter(t: &RigidTemplate, pose: &Pose, lower_in_view: bool) -> Fitter {
-        let mut f = Fitter::default();
-        for (e, edge) in t.edges.iter().enumerate() {
-            for k in 0..=8 {
-                let tau = edge.extent[0] + edge.length() * f64::from(k) / 8.0;
-                let in_view = e != 2 || lower_in_view;
-                f.points.push(Point {
-                    edge: e,
-                    tau,
-                    at: pose.place(edge, tau),
-                    step: if in_view { 1.0 } else { 0.0 },
-                    inside: 180.0,
-                    in_view,
-                });
-            }
-        }
-        f
-    }
-
-    /// The needle template at rest in a blank frame (the stations carry the readings).
-    fn needle_at_rest() -> (RigidTemplate, Pose, GrayImage) {
-        let pose = Pose {
-            psi: 0.0,
-            scale: 1.0,
-            apex: [250.0, 100.0],
-        };
-        (
-            crate::vision::rigid::needle_template(),
-            pose,
-            GrayImage::new(320, 240),
-        )
-    }
-
-    /// What `f`'s stations are refused for at `pose`, if anything.
-    fn refusal(f: &mut Fitter, t: &RigidTemplate, pose: Pose, frame: &GrayImage) -> Option<Miss> {
-        f.verify(frame, t, pose, 1e-4, 0.3).err().map(|r| r.0)
-    }
-
-    /// The two edges meeting at the apex, holding everywhere, are any corner of their
-    /// angle: without an edge away from the apex in view the pose is refused as
-    /// `scale-unseen`; with the lower flank in view it is verified.
-    #[test]
-    fn a_corner_alone_does_not_show_the_probe() {
-        let (t, pose, frame) = needle_at_rest();
-        assert_eq!(
-            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame),
-            None
-        );
-        assert_eq!(
-            refusal(&mut fitter(&t, &pose, false), &t, pose, &frame),
-            Some(Miss::ScaleUnseen)
-        );
-    }
-
-    /// Every edge holding, but the fit's rotation known to no better than the
-    /// accuracy detections are held to: refused as `low-confidence`.
-    #[test]
-    fn a_fit_whose_rotation_is_not_pinned_down_is_refused() {
-        let (t, pose, frame) = needle_at_rest();
-        let at_sigma = |deg: f64| {
-            let f = &mut fitter(&t, &pose, true);
-            f.verify(&frame, &t, pose, f64::to_radians(deg), 0.3)
-                .err()
-                .map(|r| r.0)
-        };
-        assert_eq!(at_sigma(0.9 * MAX_SIGMA_DEG), None);
-        assert_eq!(at_sigma(1.1 * MAX_SIGMA_DEG), Some(Miss::LowConfidence));
-    }
-
-    /// A particle brighter than the probe touching its tip, beside the end face's
-    /// corner: past the apex the frame lies beyond the probe's level, and the
-    /// particle's blur lifts the corner above it, so the end face's corner is hidden
-    /// by a particle, not missing. The same disc at the probe's level is not such a
-    /// particle: past the apex it reads as the probe carrying on, as a patch over the
-    /// tip does.
-    #[test]
-    fn a_particle_brighter_than_the_probe_beside_the_tip_does_not_hide_it() {
-        let (t, pose, _) = needle_at_rest();
-        let mut f = fitter(&t, &pose, true);
-        // The end face's stations from 3 px on (the nearest station's run lies
-        // inside the face, as a frame's stations do).
-        for (k, p) in f.points.iter_mut().filter(|p| p.edge == 1).enumerate() {
-            p.tau = 3.0 + k as f64;
-            p.at = pose.place(&t.edges[1], p.tau);
-        }
-        // Background 60, the needle (x up to the apex at 250, y 100-112) at 180, and
-        // beside its corner (up and right of it) a disc of radius 7 at `disc`, whose
-        // blur lifts the levels within 13 px of it by 40.
-        let frame = |disc: u8| {
-            let centre = [257.0, 93.0];
-            GrayImage::from_fn(320, 240, |x, y| {
-                let (x, y) = (f64::from(x), f64::from(y));
-                let d = (x - centre[0]).hypot(y - centre[1]);
-                let body = (50.0..=250.0).contains(&x) && (100.0..=112.0).contains(&y);
-                let level = if d <= 7.0 {
-                    disc
-                } else if body {
-                    180
-                } else {
-                    60
-                };
-                let halo = if disc > 180 && d > 7.0 && d <= 20.0 {
-                    40
-                } else {
-                    0
-                };
-                image::Luma([level.saturating_add(halo)])
-            })
-        };
-        assert!(f.particle_beside_tip(&frame(250), &t, &pose, 1));
-        assert!(!f.particle_beside_tip(&frame(180), &t, &pose, 1));
-    }
-
-    /// A lower flank whose located steps lie on a line turned about its middle: at
-    /// 1.1 deg its 31 stations still hold it at 74 % (within 1.5 px out to 78 px
-    /// either side), but its direction is another body's; at 0.5 deg it verifies.
-    #[test]
-    fn an_edge_turned_from_the_probe_s_is_another_body() {
-        let (t, pose, frame) = needle_at_rest();
-        let lower = &t.edges[2];
-        let turned = |deg: f64| {
-            let mut f = fitter(&t, &pose, true);
-            f.points.retain(|p| p.edge != 2);
-            let normal = rotate(lower.normal, pose.psi);
-            for k in 0..=30 {
-                let tau = lower.extent[0] + lower.length() * f64::from(k) / 30.0;
-                let off = (tau + 100.0) * deg.to_radians().tan();
-                f.points.push(Point {
-                    edge: 2,
-                    tau,
-                    at: add(pose.place(lower, tau), scale(normal, off)),
-                    step: 1.0,
-                    inside: 180.0,
-                    in_view: true,
-                });
-            }
-            f
-        };
-        assert_eq!(refusal(&mut turned(0.5), &t, pose, &frame), None);
-        assert_eq!(
-            refusal(&mut turned(1.1), &t, pose, &frame),
-            Some(Miss::WrongAppearance(lower.name))
-        );
-    }
-
-    /// The needle template with its flanks 40 px apart along the body, at rest, and a
-    /// frame of its body at 180 on 80 (x 50-250, y 100-140) whose core 16 px wide
-    /// reads `core` from `from_x` on.
-    fn with_core(core: u8, from_x: f64) -> (RigidTemplate, Pose, GrayImage) {
-        let (mut t, pose, _) = needle_at_rest();
-        t.edges[1].extent = [0.0, 40.0];
-        t.edges[2].offset = -40.0;
-        // The lower flank runs along -x as its extent grows.
-        t.edges[2].extent = [0.0, 200.0];
-        let frame = GrayImage::from_fn(320, 240, |x, y| {
-            let (x, y) = (f64::from(x), f64::from(y));
-            let level = if !(50.0..=250.0).contains(&x) || !(100.0..=140.0).contains(&y) {
-                80
-            } else if x >= from_x && (112.0..=128.0).contains(&y) {
-                core
-            } else {
-                180
-            };
-            image::Luma([level])
-        });
-        (t, pose, frame)
-    }
-
-    /// The body of [`with_core`] with the frame above its upper flank back at the
-    /// probe's level from `band` px out: a band of 3 px (a scratch along the flank) is
-    /// a rim, refused; one of 12 px is surroundings.
-    #[test]
-    fn an_edge_whose_outside_is_a_thin_band_is_a_line_of_the_background() {
-        let refused = |band: u32| {
-            let (t, pose, body) = with_core(180, 50.0);
-            let frame = GrayImage::from_fn(body.width(), body.height(), |x, y| {
-                if y + band < 100 {
-                    image::Luma([180])
-                } else {
-                    *body.get_pixel(x, y)
-                }
-            });
-            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
-        };
-        let upper = crate::vision::rigid::needle_template().edges[0].name;
-        assert_eq!(refused(12), None);
-        assert_eq!(refused(3), Some(Miss::WrongAppearance(upper)));
-    }
-
-    /// A core at the probe's level, at the surroundings' (a real probe's middle may
-    /// fade) or past them: only the last is refused, as two rims of another body
-    /// around its core are.
-    #[test]
-    fn two_rims_around_a_core_past_the_surroundings_are_no_probe() {
-        let refused = |core: u8| {
-            let (t, pose, frame) = with_core(core, 50.0);
-            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
-        };
-        assert_eq!(refused(180), None);
-        assert_eq!(refused(80), None);
-        let (t, _, _) = with_core(20, 50.0);
-        let flanks = [t.edges[0].name, t.edges[2].name];
-        assert!(matches!(
-            refused(20),
-            Some(Miss::WrongAppearance(name)) if flanks.contains(&name)
-        ));
-    }
-
-    /// The core past the surroundings over only the body's last 90 px, four of the
-    /// nine stations per flank (a dark lever's template along a rail, the rail's dark
-    /// gap taken for its end and its bright core beyond): refused, though the median
-    /// middle shows the probe's level. Over the last 40 px, two of nine (a flaw, a
-    /// particle on the body): verified.
-    #[test]
-    fn a_body_hollow_over_part_of_its_length_is_no_probe() {
-        let refused = |from_x: f64| {
-            let (t, pose, frame) = with_core(20, from_x);
-            refusal(&mut fitter(&t, &pose, true), &t, pose, &frame)
-        };
-        assert_eq!(refused(210.0), None);
-        assert!(matches!(refused(160.0), Some(Miss::WrongAppearance(_))));
-    }
-
-    /// A particle brighter than a bright probe lying across or beside part of its
-    /// lower flank: the stations there step the wrong way to a level beyond the
-    /// probe's, and neither hold nor miss the flank, which its other stations show. A
-    /// level a fifth of the step beyond the probe's (a background about as bright as
-    /// the probe) is no such body: those stations miss it.
-    #[test]
-    fn a_particle_across_or_beside_an_edge_does_not_hide_it() {
-        let (t, pose, frame) = needle_at_rest();
-        let with_stations = |step: f64, inside: f64| {
-            let mut f = fitter(&t, &pose, true);
-            for p in f.points.iter_mut().filter(|p| p.edge == 2).skip(2).take(4) {
-                p.step = step;
-                p.inside = inside;
-            }
-            f
-        };
-        // Across: both sides beyond the probe's level (180).
-        assert_eq!(
-            refusal(&mut with_stations(-1.5, 240.0), &t, pose, &frame),
-            None
-        );
-        // Beside: the probe's level inside, the particle outside.
-        assert_eq!(
-            refusal(&mut with_stations(-1.5, 180.0), &t, pose, &frame),
-            None
-        );
-        assert_eq!(
-            refusal(&mut with_stations(-0.2, 180.0), &t, pose, &frame),
-            Some(Miss::EdgeMissing(t.edges[2].name))
-        );
-    }
-
-    /// Past the apex the upper flank steps by 0.6 of the calibrated step at three
-    /// stations, with the probe's level on its side. Where it steps by 0.62 next to the
-    /// apex (a background brighter than on the reference) and the end face by 0.25,
-    /// nothing closes the body there and it runs on. With the end face stepping by 0.5
-    /// or more (the probe's end, in a frame of less contrast than its reference), or the
-    /// flank by 1.0 next to the apex, 0.6 is short of running on.
-    #[test]
-    fn a_body_runs_on_past_an_apex_its_closing_edge_does_not_show() {
-        let (t, pose, _) = needle_at_rest();
-        let upper = &t.edges[0];
-        let with = |flank: f64, face: f64| {
-            let mut f = fitter(&t, &pose, true);
-            for p in &mut f.points {
-                p.step = [flank, face, 1.0][p.edge];
-            }
-            for d in BEYOND_PX {
-                let tau = upper.extent[1] + d / pose.scale;
-                f.points.push(Point {
-                    edge: MAX_EDGES,
-                    tau,
-                    at: pose.place(upper, tau),
-                    step: 0.6,
-                    inside: 180.0,
-                    in_view: true,
-                });
-            }
-            f
-        };
-        assert!(with(0.62, 0.25).runs_on(&t, &pose, 0, 180.0));
-        assert!(!with(0.62, 0.5).runs_on(&t, &pose, 0, 180.0));
-        assert!(!with(0.62, 1.0).runs_on(&t, &pose, 0, 180.0));
-        assert!(!with(1.0, 0.25).runs_on(&t, &pose, 0, 180.0));
     }
 }
