@@ -39,7 +39,6 @@ pub mod snapshot;
 pub mod stats;
 pub mod stream;
 mod supervisor;
-mod supervisor_health;
 pub mod telemetry;
 pub mod tick_record;
 

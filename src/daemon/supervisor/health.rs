@@ -6,11 +6,11 @@ use std::sync::atomic::Ordering;
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use super::haptic_loop::LoopShared;
-use super::notify::Notifier;
-use super::pipeline::PipelineShared;
-use super::recording::{RecordingState, RecordingStatus};
 use crate::control::SafetyState;
+use crate::daemon::haptic_loop::LoopShared;
+use crate::daemon::notify::Notifier;
+use crate::daemon::pipeline::PipelineShared;
+use crate::daemon::recording::{RecordingState, RecordingStatus};
 
 /// A frame source silent for longer than this makes the pipeline unhealthy.
 const FRAME_SILENCE: Duration = Duration::from_secs(2);
