@@ -1,7 +1,7 @@
 //! Rigid probes of named edges (a tungsten needle, a tipless cantilever, a gripper jaw;
-//! docs/tracker.md, "Rigid probes of named edges") tracked over the renderer's tool
-//! suites: sessions of one or two SEM conditions each, over synthetic and real
-//! backgrounds (`tests/data/real-sem`), each calibrated from its reference's clicks.
+//! docs/rigid-probes.md) tracked over the renderer's tool suites: sessions of one or
+//! two SEM conditions each, over synthetic and real backgrounds (`tests/data/real-sem`),
+//! each calibrated from its reference's clicks.
 //! Targets per kind over at least 300 frames with the tool in view: detection >= 99.5 %,
 //! no detection on a frame without it, angle error median <= 0.03 deg and p95 <= 0.10
 //! deg; the reported standard error covers the error (median |error| / sigma in
@@ -275,9 +275,9 @@ fn measure(kind: ToolKind) -> Measured {
 }
 
 /// Bounds measured on the default seed (and the held-out seed 97), below the issue's
-/// targets where the tracker does not reach them yet (docs/tracker.md, "Rigid probes
-/// of named edges"): detection 99.3-100 % (held-out 99.7-100 %), no false
-/// detection at the scales the lab states, up to 0.7 % of detections beyond 4 sigma.
+/// targets where the tracker does not reach them yet (docs/rigid-probes.md): detection
+/// 99.3-100 % (held-out 99.7-100 %), no false detection at the scales the lab states,
+/// up to 0.7 % of detections beyond 4 sigma.
 const MIN_DETECTION: f64 = 0.993;
 const MAX_BEYOND_4_SIGMA: f64 = 0.007;
 
@@ -358,8 +358,7 @@ const DECOY_STREAM: u64 = 77;
 /// seed. None is detected, but for the tipless lever on frames that show its outline:
 /// a tipless lever is a strip with a square end, and the random shapes' beam-like
 /// strips and the AFM levers' beams (another probe, a tip under a patch) are such
-/// strips; those detections are reported, not refused (docs/tracker.md, "Rigid probes
-/// of named edges").
+/// strips; those detections are reported, not refused (docs/rigid-probes.md).
 #[test]
 fn no_tool_is_found_on_frames_without_it() {
     let seed = tool_seed();

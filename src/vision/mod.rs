@@ -29,7 +29,7 @@
 //!   body a detection claims of its frame;
 //! - `rigid`: any other rigid probe (a needle, a tipless cantilever, a gripper jaw),
 //!   calibrated from its named edges and tracked by its own search, fit and checks;
-//!   [`Tracker`] is either engine (docs/tracker.md, "Rigid probes of named edges").
+//!   [`Tracker`] is either engine (docs/rigid-probes.md).
 //!
 //! Conventions (docs/conventions.md): pixels x right, y down, origin at the top-left pixel's
 //! centre; output angles in degrees, counter-clockwise on screen.

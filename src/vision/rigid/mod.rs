@@ -3,7 +3,7 @@
 //! straight edges. The template is calibrated from clicked pixels on each named edge
 //! (`calibrate`); a frame sees it through a similarity (rotation, scale, apex).
 //!
-//! Tracking a frame (docs/tracker.md, "Rigid probes of named edges"):
+//! Tracking a frame (docs/rigid-probes.md):
 //! - `search`: with no prior, a polarity-gated Hough search places the template from
 //!   its two apex edges and its farthest edge;
 //! - `fit`: each placement is fitted on the full-resolution grey levels, at stations
