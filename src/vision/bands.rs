@@ -6,7 +6,7 @@
 
 use super::geometry::{add, along, clip_to_rect, dot, norm, scale, sub, Line};
 use super::refine::{half_width, Band, FitResult, Partner, BEND_UNIT_PX};
-use super::template::{Pose, Template, BLUE, GREEN, RED};
+use super::template::{PerEdge, Pose, Template, BLUE, GREEN, RED};
 use crate::model::{Cantilever, ModelTable};
 
 /// How much of the beam edge (in tip heights from the free end) is fitted: all of it
@@ -143,7 +143,7 @@ pub fn bands(
     size: [f64; 2],
     blur: f64,
     bend: BendPrior,
-) -> [Option<Band>; 3] {
+) -> PerEdge<Option<Band>> {
     let (nb, ng) = (t.edges[BLUE].normal, t.edges[GREEN].normal);
     let sin_apex = (nb[0] * ng[1] - nb[1] * ng[0]).abs().max(0.2);
     let reach = half_width(blur) + 2.5 * blur;

@@ -22,7 +22,7 @@ use super::options::{CalibrationConfig, TrackerConfig};
 use super::pyramid::Pyramid;
 use super::refine::{Band, Refiner, Turns};
 use super::stations;
-use super::template::{Template, TemplateEdge, BLUE, GREEN, RED};
+use super::template::{PerEdge, Template, TemplateEdge, BLUE, EDGES, GREEN, RED};
 use super::{Edge, VisionError};
 
 /// Largest distance (detection pixels) of the edge pixels used from the clicked line.
@@ -84,7 +84,7 @@ pub struct CalibratedEdge {
 /// The calibration of one probe: the refined edges and the template built from them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Calibration {
-    edges: [CalibratedEdge; 3],
+    edges: PerEdge<CalibratedEdge>,
     template: Template,
     image_size: [u32; 2],
     blur_px: f64,
@@ -114,7 +114,7 @@ impl Calibration {
             check_clicks(*edge, pts, w, h)?;
         }
         let clicked = click_lines(points)?;
-        let polarity: [f64; 3] = [
+        let polarity: PerEdge<f64> = [
             side_polarity(Edge::Red, &clicked[RED], points[RED], reference)?,
             side_polarity(Edge::Blue, &clicked[BLUE], points[BLUE], reference)?,
             side_polarity(Edge::Green, &clicked[GREEN], points[GREEN], reference)?,
@@ -123,9 +123,9 @@ impl Calibration {
         pyr.build(reference);
         let mut map = EdgeMap::default();
         let threshold = pyr.threshold(cfg.threshold);
-        let locate_all = |map: &EdgeMap| -> Result<[Located; 3], VisionError> {
-            let mut out = [None; 3];
-            for e in 0..3 {
+        let locate_all = |map: &EdgeMap| -> Result<PerEdge<Located>, VisionError> {
+            let mut out = [None; EDGES];
+            for e in 0..EDGES {
                 out[e] = Some(locate(
                     Edge::ALL[e],
                     points[e],
@@ -183,7 +183,7 @@ impl Calibration {
             turn_sigma_robust,
             blur,
         } = fit_edges(reference, &second, blur)?;
-        for e in 0..3 {
+        for e in 0..EDGES {
             if contrast[e] * polarity[e] <= 0.0 {
                 return Err(VisionError::EdgeNotFound {
                     edge: Edge::ALL[e],
@@ -203,7 +203,7 @@ impl Calibration {
         }
         template.beam_px = beam_thickness(reference, &template, contrast[RED], blur);
         let grey_mask = masked
-            && (0..3).all(|e| {
+            && (0..EDGES).all(|e| {
                 level[e] + contrast[e] - f64::from(threshold) >= MASK_MARGIN * contrast[e]
             });
         let edges = std::array::from_fn(|e| {
@@ -444,21 +444,21 @@ fn lower_face_depth(
 
 /// What each edge's own grey-level fit found on the reference.
 struct EdgeFits {
-    lines: [Line; 3],
-    contrast: [f64; 3],
+    lines: PerEdge<Line>,
+    contrast: PerEdge<f64>,
     /// Grey level just outside each edge.
-    level: [f64; 3],
+    level: PerEdge<f64>,
     /// Standard errors of the lines' rotations, radians: from the pixel noise, and
     /// with the background's structure (`EdgeResult::turn_sigma_robust`).
-    turn_sigma: [f64; 3],
-    turn_sigma_robust: [f64; 3],
+    turn_sigma: PerEdge<f64>,
+    turn_sigma_robust: PerEdge<f64>,
     blur: f64,
 }
 
 /// Each edge's own grey-level fit over `bands`.
 fn fit_edges(
     reference: &GrayImage,
-    bands: &[Option<Band>; 3],
+    bands: &PerEdge<Option<Band>>,
     blur: f64,
 ) -> Result<EdgeFits, VisionError> {
     let fit = Refiner::default()
@@ -467,12 +467,12 @@ fn fit_edges(
     let mut lines = [Line {
         normal: [1.0, 0.0],
         rho: 0.0,
-    }; 3];
-    let mut contrast = [0.0; 3];
-    let mut level = [0.0; 3];
-    let mut turn_sigma = [0.0; 3];
-    let mut turn_sigma_robust = [0.0; 3];
-    for e in 0..3 {
+    }; EDGES];
+    let mut contrast = [0.0; EDGES];
+    let mut level = [0.0; EDGES];
+    let mut turn_sigma = [0.0; EDGES];
+    let mut turn_sigma_robust = [0.0; EDGES];
+    for e in 0..EDGES {
         let r = fit.edges[e].ok_or(VisionError::EdgeNotFound {
             edge: Edge::ALL[e],
             reason: "too few pixels along the edge".into(),
@@ -668,7 +668,7 @@ fn locate(
 /// towards the green clicks and green's towards the blue ones (the pyramid lies between
 /// its faces), red's towards the apex where the clicked faces meet (the pyramid hangs
 /// below the beam's upper face).
-fn click_lines(points: [&[[f64; 2]]; 3]) -> Result<[Line; 3], VisionError> {
+fn click_lines(points: PerEdge<&[[f64; 2]]>) -> Result<PerEdge<Line>, VisionError> {
     let centroid = |pts: &[[f64; 2]]| {
         let n = pts.len() as f64;
         [
@@ -679,8 +679,8 @@ fn click_lines(points: [&[[f64; 2]]; 3]) -> Result<[Line; 3], VisionError> {
     let mut lines = [Line {
         normal: [0.0, 1.0],
         rho: 0.0,
-    }; 3];
-    for e in 0..3 {
+    }; EDGES];
+    for e in 0..EDGES {
         let normal = fit_points(points[e], [0.0, 1.0])
             .ok_or_else(|| VisionError::EdgeNotFound {
                 edge: Edge::ALL[e],
@@ -693,7 +693,7 @@ fn click_lines(points: [&[[f64; 2]]; 3]) -> Result<[Line; 3], VisionError> {
         VisionError::Degenerate("the blue and green clicks lie on parallel lines".into())
     })?;
     let inside = [apex, centroid(points[GREEN]), centroid(points[BLUE])];
-    for e in 0..3 {
+    for e in 0..EDGES {
         if lines[e].depth(inside[e]) < 0.0 {
             lines[e] = Line::through(centroid(points[e]), scale(lines[e].normal, -1.0));
         }
@@ -803,7 +803,7 @@ fn band_for(e: usize, loc: &Located, apex: [f64; 2]) -> Band {
 }
 
 /// The template from the refined lines and the followed extents; checks the geometry.
-fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, VisionError> {
+fn build_template(lines: &PerEdge<Line>, loc: &PerEdge<Located>) -> Result<Template, VisionError> {
     let degenerate = |m: &str| VisionError::Degenerate(m.into());
     let (nb, ng) = (lines[BLUE].normal, lines[GREEN].normal);
     if (nb[0] * ng[1] - nb[1] * ng[0]).abs() < 0.17 {
@@ -826,7 +826,7 @@ fn build_template(lines: &[Line; 3], loc: &[Located; 3]) -> Result<Template, Vis
         far_tau: 0.0,
         far_open: false,
         polarity: 1.0,
-    }; 3];
+    }; EDGES];
     // The faces first: where they meet the beam tells which end of it is free.
     for e in [BLUE, GREEN, RED] {
         let n = lines[e].normal;

@@ -6,6 +6,7 @@
 use super::edges::EdgePoint;
 use super::geometry::{along, clip_to_rect, dot, scale, sub, wrap_pi};
 use super::hough::{Peak, WIDE_PEAKS_PER_EDGE};
+use super::template::{PerEdge, EDGES};
 
 /// Inlier band half-width around a candidate line, detection pixels.
 const INLIER_PX: f64 = 1.5;
@@ -63,14 +64,14 @@ impl Candidates {
         &mut self,
         peaks: &[Peak],
         points: &[EdgePoint],
-        voters: &[Vec<u32>; 3],
-        normal_angles: [f64; 3],
+        voters: &PerEdge<Vec<u32>>,
+        normal_angles: PerEdge<f64>,
         size: [usize; 2],
         per_edge: usize,
     ) {
         self.list.clear();
         // Sized for the most peaks there can be: no growth from frame to frame.
-        let most = 3 * WIDE_PEAKS_PER_EDGE;
+        let most = EDGES * WIDE_PEAKS_PER_EDGE;
         debug_assert!(peaks.len() <= most);
         self.list.reserve(most);
         self.prefix.resize(most * (PROFILE_BINS + 1), 0);

@@ -17,6 +17,7 @@
 use super::edges::EdgePoint;
 use super::geometry::{truncate_index, wrap_pi};
 use super::simd::dispatch;
+use super::template::{PerEdge, EDGES};
 
 /// Width of a psi bin, radians.
 pub const PSI_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
@@ -51,7 +52,7 @@ pub struct Hough {
     rho_min: f64,
     window_rad: f64,
     /// Inward normal angles of the three edges in the reference, image radians.
-    normal_angles: [f64; 3],
+    normal_angles: PerEdge<f64>,
     /// cos / sin of (normal angle + psi) per edge and psi bin.
     cos: Vec<f32>,
     sin: Vec<f32>,
@@ -65,7 +66,7 @@ pub struct Hough {
     /// Pixels of the detection image (the most edge points there can be).
     pixels: usize,
     /// Per edge, the indices of the points that voted for it (polarity-compatible).
-    pub voters: [Vec<u32>; 3],
+    pub voters: PerEdge<Vec<u32>>,
     /// Scratch of `find_peaks`: which cells of a row are the maximum of their row.
     row_max: Vec<u8>,
 }
@@ -77,7 +78,7 @@ impl Hough {
         width: usize,
         height: usize,
         window_rad: f64,
-        normal_angles: [f64; 3],
+        normal_angles: PerEdge<f64>,
     ) {
         self.pixels = width * height;
         let n_psi = 2 * (window_rad / PSI_STEP_RAD).ceil() as usize + 1;
@@ -102,14 +103,14 @@ impl Hough {
             }
         }
         self.acc.clear();
-        self.acc.resize(3 * n_psi * n_rho, 0);
+        self.acc.resize(EDGES * n_psi * n_rho, 0);
         self.smooth.clear();
-        self.smooth.resize(3 * n_psi * n_rho, 0);
+        self.smooth.resize(EDGES * n_psi * n_rho, 0);
         self.votes_span.clear();
-        self.votes_span.resize(3 * n_psi, (usize::MAX, 0));
+        self.votes_span.resize(EDGES * n_psi, (usize::MAX, 0));
         self.smooth_span.clear();
-        self.smooth_span.resize(3 * n_psi, (usize::MAX, 0));
-        self.peaks.reserve(3 * WIDE_PEAKS_PER_EDGE);
+        self.smooth_span.resize(EDGES * n_psi, (usize::MAX, 0));
+        self.peaks.reserve(EDGES * WIDE_PEAKS_PER_EDGE);
     }
 
     fn psi_of(&self, k: usize) -> f64 {
@@ -142,7 +143,7 @@ impl Hough {
         for (index, p) in points.iter().enumerate() {
             let tol = (1.5 * noise / p.mag) as f64 + 1.5f64.to_radians();
             let tol = tol.clamp(2f64.to_radians(), 8f64.to_radians());
-            for e in 0..3 {
+            for e in 0..EDGES {
                 let psi = wrap_pi(p.angle as f64 - self.normal_angles[e]);
                 if psi.abs() > self.window_rad + tol {
                     continue;
@@ -176,7 +177,7 @@ impl Hough {
     #[inline(always)]
     fn find_peaks_body(&mut self, most: usize) {
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
-        for row in 0..3 * n_psi {
+        for row in 0..EDGES * n_psi {
             let dst = &mut self.smooth[row * n_rho..(row + 1) * n_rho];
             let old = self.smooth_span[row];
             if old.0 <= old.1 {
@@ -199,7 +200,7 @@ impl Hough {
         }
         self.peaks.clear();
         self.row_max.resize(n_rho, 0);
-        for e in 0..3 {
+        for e in 0..EDGES {
             let first = self.peaks.len();
             for k in 0..n_psi {
                 let (a, b) = self.smooth_span[e * n_psi + k];

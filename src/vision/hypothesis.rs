@@ -14,7 +14,7 @@
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
 use super::geometry::{add, along, clip_to_rect, dot, norm, rotate, scale, sub, wrap_pi};
-use super::template::{Pose, Template, RED};
+use super::template::{PerEdge, Pose, Template, EDGES, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
 const SCALE_MIN: f64 = 0.05;
@@ -73,8 +73,8 @@ fn edge_score(e: usize, c: &Coverage) -> f64 {
     }
 }
 
-fn total_score(cov: &[Coverage; 3]) -> f64 {
-    (0..3).map(|e| edge_score(e, &cov[e])).sum()
+fn total_score(cov: &PerEdge<Coverage>) -> f64 {
+    (0..EDGES).map(|e| edge_score(e, &cov[e])).sum()
 }
 
 /// A placed tip and its evidence.
@@ -83,8 +83,8 @@ pub struct Hypothesis {
     /// Pose in detection-image coordinates.
     pub pose: Pose,
     /// Candidate index per edge (into `Candidates::list`), if the edge was one.
-    pub members: [Option<usize>; 3],
-    pub coverage: [Coverage; 3],
+    pub members: PerEdge<Option<usize>>,
+    pub coverage: PerEdge<Coverage>,
     pub score: f64,
     /// For a pair: the scales that explain the pair equally well (the apex moves along
     /// `apex0 + scale * apex1`); the edge left out decides among them.
@@ -187,9 +187,9 @@ impl Search {
                 return;
             }
         }
-        let mut members = [None; 3];
-        let mut turned = [([0.0; 2], [0.0; 2]); 3];
-        let mut reach = [None; 3];
+        let mut members = [None; EDGES];
+        let mut turned = [([0.0; 2], [0.0; 2]); EDGES];
+        let mut reach = [None; EDGES];
         for &i in idx {
             let e = list[i].edge;
             members[e] = Some(i);
@@ -200,11 +200,11 @@ impl Search {
                 return;
             }
         }
-        let partial = |pose: &Pose| -> Option<([Coverage; 3], f64)> {
+        let partial = |pose: &Pose| -> Option<(PerEdge<Coverage>, f64)> {
             if !plausible(t, pose, size) || reach.iter().flatten().any(|r| !r.may_cover(pose)) {
                 return None;
             }
-            let mut cov = [Coverage::default(); 3];
+            let mut cov = [Coverage::default(); EDGES];
             for (e, m) in members.iter().enumerate() {
                 if let Some(i) = m {
                     cov[e] = member_cover(pose, turned[e], cands, &list[*i])?;
@@ -212,11 +212,11 @@ impl Search {
             }
             Some((cov, total_score(&cov)))
         };
-        let mut rows = [LineRow::default(); 3];
+        let mut rows = [LineRow::default(); EDGES];
         for (r, &i) in rows.iter_mut().zip(idx) {
             *r = LineRow::new(t, &list[i], psi);
         }
-        let best = if idx.len() == 3 {
+        let best = if idx.len() == EDGES {
             solve3(&rows).and_then(|(apex, scale)| {
                 let pose = Pose { psi, scale, apex };
                 partial(&pose).map(|(cov, s)| (pose, cov, s, None))
@@ -342,8 +342,8 @@ fn scan_scale(
     r: &[LineRow],
     psi: f64,
     within: impl Fn([f64; 2], [f64; 2]) -> [f64; 2],
-    score: impl Fn(&Pose) -> Option<([Coverage; 3], f64)>,
-) -> Option<(Pose, [Coverage; 3], f64, Option<Plateau>)> {
+    score: impl Fn(&Pose) -> Option<(PerEdge<Coverage>, f64)>,
+) -> Option<(Pose, PerEdge<Coverage>, f64, Option<Plateau>)> {
     let det = r[0].normal[0] * r[1].normal[1] - r[0].normal[1] * r[1].normal[0];
     if det.abs() < 0.05 {
         return None;
@@ -364,7 +364,7 @@ fn scan_scale(
         grid.partition_point(|&s| s < lo),
         grid.partition_point(|&s| s <= hi.min(SCALE_MAX)),
     );
-    let mut best: Option<(Pose, [Coverage; 3], f64)> = None;
+    let mut best: Option<(Pose, PerEdge<Coverage>, f64)> = None;
     let mut scores = [f64::NEG_INFINITY; SCALE_STEPS_MAX];
     let mut best_k = 0;
     for k in first..last {
@@ -399,11 +399,11 @@ fn scan_scale(
 /// Scores the edges a hypothesis left out where it puts them (directly on the edge
 /// map), choosing for a pair the scale along its plateau that explains them best.
 fn place_missing(t: &Template, h: &mut Hypothesis, edges: &EdgeMap) {
-    let missing = |h: &Hypothesis, pose: &Pose| -> [Option<Coverage>; 3] {
+    let missing = |h: &Hypothesis, pose: &Pose| -> PerEdge<Option<Coverage>> {
         std::array::from_fn(|e| h.members[e].is_none().then(|| walk(t, pose, e, edges)))
     };
-    let total = |h: &Hypothesis, cov: &[Option<Coverage>; 3]| -> f64 {
-        (0..3)
+    let total = |h: &Hypothesis, cov: &PerEdge<Option<Coverage>>| -> f64 {
+        (0..EDGES)
             .map(|e| edge_score(e, &cov[e].unwrap_or(h.coverage[e])))
             .sum()
     };

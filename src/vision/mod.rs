@@ -60,6 +60,7 @@ mod verify;
 use std::fmt;
 
 use crate::model::Cantilever;
+use template::PerEdge;
 
 pub use autocal::{auto_calibrate, clicks_from_apex, find_apex, AutoCalError, AutoClicks};
 pub use calibration::{CalibratedEdge, Calibration};
@@ -95,7 +96,7 @@ pub enum Edge {
 }
 
 impl Edge {
-    pub const ALL: [Edge; 3] = [Edge::Red, Edge::Blue, Edge::Green];
+    pub const ALL: PerEdge<Edge> = [Edge::Red, Edge::Blue, Edge::Green];
 
     /// Position in per-edge arrays such as [`Estimate::edges`].
     pub fn index(self) -> usize {

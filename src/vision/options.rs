@@ -2,6 +2,7 @@
 //! coordinates count from ([`PixelOrigin`]), the `[tracker]` settings
 //! ([`TrackerConfig`]) and the clicked calibration ([`CalibrationConfig`]). `config`
 //! reads and validates them from TOML; vision owns them.
+use super::template::PerEdge;
 use std::fmt;
 use std::path::PathBuf;
 
@@ -160,7 +161,7 @@ pub struct CalibrationConfig {
 }
 
 /// The AFM pyramid's edge names, in [`crate::vision::Edge`] order.
-pub const PYRAMID_EDGES: [&str; 3] = ["red", "blue", "green"];
+pub const PYRAMID_EDGES: PerEdge<&str> = ["red", "blue", "green"];
 
 impl CalibrationConfig {
     /// The AFM pyramid's clicks.
@@ -198,7 +199,7 @@ impl CalibrationConfig {
     }
 
     /// The red, blue and green clicks when these are the AFM pyramid's.
-    pub fn pyramid_points(&self) -> Option<[&[[f64; 2]]; 3]> {
+    pub fn pyramid_points(&self) -> Option<PerEdge<&[[f64; 2]]>> {
         if self.apex.is_some() || self.edges.len() != PYRAMID_EDGES.len() {
             return None;
         }

@@ -11,10 +11,15 @@
 
 use super::geometry::{add, along, dot, rotate, scale, Line};
 
-/// Indices of the three tracked edges, in the order used by every array here.
+/// Indices of the tracked edges, in the order used by every per-edge array.
 pub const RED: usize = 0;
 pub const BLUE: usize = 1;
 pub const GREEN: usize = 2;
+/// How many edges the pyramid's template has: the beam edge and the two faces.
+pub const EDGES: usize = 3;
+/// One value per edge of the pyramid's template, indexed by [`RED`], [`BLUE`] and
+/// [`GREEN`] (as [`Edge::index`](super::Edge::index) gives them).
+pub type PerEdge<T> = [T; EDGES];
 
 /// One edge of the template.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,7 +59,7 @@ impl TemplateEdge {
 /// The tip as the reference image shows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Template {
-    pub edges: [TemplateEdge; 3],
+    pub edges: PerEdge<TemplateEdge>,
     /// Apex in the reference image, pixels.
     pub apex: [f64; 2],
     /// Distance from the apex to the red line: the pyramid's height plus the beam's
@@ -138,7 +143,7 @@ impl Template {
 
     /// Image angles (radians) of the three edges' gradients in the reference: towards
     /// the brighter side, i.e. the inward normal turned by the edge's polarity.
-    pub fn gradient_angles(&self) -> [f64; 3] {
+    pub fn gradient_angles(&self) -> PerEdge<f64> {
         self.edges.map(|e| {
             let g = scale(e.normal, e.polarity);
             g[1].atan2(g[0])
@@ -199,7 +204,7 @@ mod tests {
             scale: 2.0,
             apex: [10.0, 20.0],
         };
-        for e in 0..3 {
+        for e in 0..EDGES {
             let line = t.line(&pose, e);
             let edge = &t.edges[e];
             for tau in [edge.tip_tau, edge.far_tau] {

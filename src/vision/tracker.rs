@@ -27,7 +27,7 @@ use super::pyramid::Pyramid;
 use super::refine::{half_width, Band, FitResult, Refiner, Tie, Turns};
 use super::rigid::{calibrate as calibrate_rigid, RigidError, RigidTemplate, RigidTracker};
 use super::stations;
-use super::template::{Pose, Template, BLUE, GREEN, RED};
+use super::template::{PerEdge, Pose, Template, BLUE, EDGES, GREEN, RED};
 use super::verify::{self, Evidence, MIN_CONFIDENCE};
 use super::{Edge, EdgeFit, Estimate, Miss, VisionError, MAX_EDGES};
 use crate::model::Cantilever;
@@ -60,11 +60,8 @@ const COARSE_RETRIES: [(u32, u32); 3] = [(2, 1), (3, 2), (3, 1)];
 /// (where a second search found nothing but more decoys: docs/tracker.md).
 const RETRY_CONTRAST_NOISES: f64 = 16.0;
 
-/// Per-edge flags.
-type Vec3Mask = [bool; 3];
-
 /// The edges a grey-level fit placed: given a band and found by the fit.
-fn fitted_edges(bands: &[Option<Band>; 3], fit: &FitResult) -> Vec3Mask {
+fn fitted_edges(bands: &PerEdge<Option<Band>>, fit: &FitResult) -> PerEdge<bool> {
     std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some())
 }
 
@@ -505,7 +502,7 @@ impl PyramidTracker {
     }
 
     /// Each edge's calibrated signed step, in edge order.
-    fn calibrated_steps(&self) -> [f64; 3] {
+    fn calibrated_steps(&self) -> PerEdge<f64> {
         Edge::ALL.map(|e| self.calibration.edge(e).contrast)
     }
 
@@ -578,7 +575,7 @@ impl PyramidTracker {
         t: &Template,
         hyp: &Hypothesis,
         with_beam_edge: bool,
-    ) -> Option<(Pose, FitResult, [Option<Band>; 3])> {
+    ) -> Option<(Pose, FitResult, PerEdge<Option<Band>>)> {
         let k = self.factor as f64;
         let pose = Pose {
             psi: hyp.pose.psi,
@@ -588,12 +585,12 @@ impl PyramidTracker {
         let size = [frame.width() as f64, frame.height() as f64];
         // Fit the edges the search found: its lines, and a left-out edge only where the
         // edge map confirms it (a pair leaves the scale, hence that edge, uncertain).
-        let mut keep: [bool; 3] = std::array::from_fn(|e| {
+        let mut keep: PerEdge<bool> = std::array::from_fn(|e| {
             hyp.members[e].is_some()
                 || hyp.coverage[e].fraction() >= CONFIRMED_FRACTION
                 || (with_beam_edge && e == RED)
         });
-        let only = |b: [Option<Band>; 3], keep: &[bool; 3]| -> [Option<Band>; 3] {
+        let only = |b: PerEdge<Option<Band>>, keep: &PerEdge<bool>| -> PerEdge<Option<Band>> {
             std::array::from_fn(|e| b[e].filter(|_| keep[e]))
         };
         let prior = bend_prior(t, &pose, self.cantilever, 0.0);
@@ -621,11 +618,11 @@ impl PyramidTracker {
             })
         };
         let fitted = fitted_edges(&bands, &fit);
-        let weak: Vec3Mask =
+        let weak: PerEdge<bool> =
             std::array::from_fn(|e| fitted[e] && ratio(&fit, e) < DROP_CONTRAST_RATIO);
-        let strong = (0..3).filter(|&e| fitted[e] && !weak[e]).count();
+        let strong = (0..EDGES).filter(|&e| fitted[e] && !weak[e]).count();
         if weak.iter().any(|&w| w) && strong >= 2 {
-            for e in 0..3 {
+            for e in 0..EDGES {
                 keep[e] &= !weak[e];
             }
             bands = only(bands, &keep);
@@ -647,7 +644,7 @@ impl PyramidTracker {
         t: &Template,
         pose: &Pose,
         fit: &FitResult,
-        bands: &[Option<Band>; 3],
+        bands: &PerEdge<Option<Band>>,
     ) -> Option<Miss> {
         let [x, y] = pose.apex;
         let (w, h) = (frame.width() as f64, frame.height() as f64);
@@ -681,7 +678,7 @@ impl PyramidTracker {
         hyp: &Hypothesis,
         pose: &Pose,
         fit: &FitResult,
-        bands: &[Option<Band>; 3],
+        bands: &PerEdge<Option<Band>>,
     ) -> Estimate {
         let size = [frame.width() as f64, frame.height() as f64];
         if let Some(miss) = self.refusal(frame, t, pose, fit, bands) {

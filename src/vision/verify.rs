@@ -19,7 +19,7 @@ use image::GrayImage;
 
 use super::geometry::{sub, Line};
 use super::refine::FitResult;
-use super::template::{Pose, Template, BLUE, GREEN};
+use super::template::{PerEdge, Pose, Template, BLUE, EDGES, GREEN};
 
 /// Share of the predicted segments covered by edge pixels from which coverage counts
 /// fully (none below 0.3). On harsh frames at high magnification, Canny on the binned
@@ -74,9 +74,9 @@ pub fn coverage_score(coverage: f64) -> f64 {
 
 /// The fitted contrast of each edge in view relative to its calibrated contrast; the
 /// smallest one (0 if an edge in view was not found at all).
-pub fn contrast_ratio(fit: &FitResult, in_view: &[bool; 3], calibrated: &[f64; 3]) -> f64 {
+pub fn contrast_ratio(fit: &FitResult, in_view: &PerEdge<bool>, calibrated: &PerEdge<f64>) -> f64 {
     let mut ratio = f64::INFINITY;
-    for e in 0..3 {
+    for e in 0..EDGES {
         if !in_view[e] {
             continue;
         }

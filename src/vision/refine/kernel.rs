@@ -13,26 +13,27 @@ use super::{
 };
 use crate::vision::geometry::{along, dot, rotate, sub};
 use crate::vision::simd::dispatch;
+use crate::vision::template::{PerEdge, EDGES};
 
 impl Refiner {
     pub(super) fn normal_equations(
         &mut self,
-        frames: &[Option<EdgeFrame>; 3],
+        frames: &PerEdge<Option<EdgeFrame>>,
         x: &[f64; N_PARAMS],
-        noise: &[f64; 3],
+        noise: &PerEdge<f64>,
         shared: bool,
         step: usize,
     ) -> Normal {
         let mut ne = Normal::default();
         let st = &mut self.stretches;
-        st.sq = [0.0; 3 * CHUNKS_PER_EDGE];
-        st.n = [0; 3 * CHUNKS_PER_EDGE];
-        st.row = [[0.0; 8]; 3 * CHUNKS_PER_EDGE];
-        st.hh = [0.0; 3 * CHUNKS_PER_EDGE];
-        st.g = [0.0; 3 * CHUNKS_PER_EDGE];
-        let mut sq = [0.0f64; 3];
-        let mut wsum = [0.0f64; 3];
-        let normals: [[f64; 2]; 3] = std::array::from_fn(|e| {
+        st.sq = [0.0; EDGES * CHUNKS_PER_EDGE];
+        st.n = [0; EDGES * CHUNKS_PER_EDGE];
+        st.row = [[0.0; 8]; EDGES * CHUNKS_PER_EDGE];
+        st.hh = [0.0; EDGES * CHUNKS_PER_EDGE];
+        st.g = [0.0; EDGES * CHUNKS_PER_EDGE];
+        let mut sq = [0.0f64; EDGES];
+        let mut wsum = [0.0f64; EDGES];
+        let normals: PerEdge<[f64; 2]> = std::array::from_fn(|e| {
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
             frames[e].map_or([0.0, 0.0], |f| rotate(f.normal0, turn))
         });
@@ -72,7 +73,7 @@ impl Refiner {
                 }
             }
         }
-        for e in 0..3 {
+        for e in 0..EDGES {
             ne.noise[e] = if wsum[e] > 0.0 {
                 (sq[e] / wsum[e]).sqrt().max(0.5)
             } else {
@@ -637,13 +638,13 @@ impl Refiner {
     /// calibration's cost (one more pass over the samples), not the tracker's.
     pub(super) fn stretch_shares(
         &self,
-        frames: &[Option<EdgeFrame>; 3],
+        frames: &PerEdge<Option<EdgeFrame>>,
         x: &[f64; N_PARAMS],
-        noise: &[f64; 3],
+        noise: &PerEdge<f64>,
     ) -> Vec<StretchShare> {
-        let mut score = vec![[0.0; 8]; 3 * CHUNKS_PER_EDGE];
-        let mut blocks = vec![[LevelBlock::ZERO; 2]; 3 * CHUNKS_PER_EDGE];
-        let mut counted = [false; 3 * CHUNKS_PER_EDGE];
+        let mut score = vec![[0.0; 8]; EDGES * CHUNKS_PER_EDGE];
+        let mut blocks = vec![[LevelBlock::ZERO; 2]; EDGES * CHUNKS_PER_EDGE];
+        let mut counted = [false; EDGES * CHUNKS_PER_EDGE];
         let table = cdf_table();
         let mut m = ModelLanes::default();
         for (e, f) in frames.iter().enumerate() {
@@ -675,7 +676,7 @@ impl Refiner {
                 }
             }
         }
-        (0..3 * CHUNKS_PER_EDGE)
+        (0..EDGES * CHUNKS_PER_EDGE)
             .filter(|&c| counted[c])
             .map(|c| {
                 let prior = pixel_weight(noise[c / CHUNKS_PER_EDGE], STRETCH_LEVEL_SIGMA, 1);

@@ -30,6 +30,7 @@
 use image::GrayImage;
 
 use super::geometry::{along, dot, sub, Line};
+use super::template::{PerEdge, EDGES};
 
 mod gauss;
 mod kernel;
@@ -85,14 +86,16 @@ const ALONG_UNIT_PX: f64 = 100.0;
 /// 0.0426 -> 0.0371 deg, frames above 0.2 deg 22 -> 9 of 2,859; 0.7 and 1.5 measure
 /// the same, 6 loses a third of the gain.
 const PROBE_SLOPE_SIGMA: f64 = 2.5;
-const N_PARAMS: usize = 8 + 3 * PHOTO;
-/// Parameter layout.
-const P_TURN: usize = 0; // 3 rotations (only the first in shared mode)
-const P_OFFSET: usize = 3; // 3 offsets
-const P_BEND: usize = 6;
-const P_BLUR: usize = 7;
-const P_PHOTO: usize = 8; // per edge: level, level slope, contrast, contrast slope
+/// Parameter layout: a rotation per edge (only the first in shared mode), an offset per
+/// edge, the beam edge's bend, the blur, then per edge its photometry (level, level
+/// slope, contrast, contrast slope).
+const P_TURN: usize = 0;
+const P_OFFSET: usize = P_TURN + EDGES;
+const P_BEND: usize = P_OFFSET + EDGES;
+const P_BLUR: usize = P_BEND + 1;
+const P_PHOTO: usize = P_BLUR + 1;
 const PHOTO: usize = 4;
+const N_PARAMS: usize = P_PHOTO + EDGES * PHOTO;
 
 /// The stretch of one edge to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -179,11 +182,11 @@ pub enum Turns {
 pub struct Tie {
     /// From the reference's pixel noise (the calibration fit's normal equations): the
     /// edges are weighed by these.
-    pub weigh: [f64; 3],
+    pub weigh: PerEdge<f64>,
     /// What the reference's reading may be off by, background structure included
     /// (`EdgeResult::turn_sigma_robust`): the tip's standard error carries these,
     /// combined with the weights the first ones give.
-    pub error: [f64; 3],
+    pub error: PerEdge<f64>,
 }
 
 /// Smallest calibration standard error of an edge's orientation that [`Turns::Tied`]
@@ -222,7 +225,7 @@ pub struct EdgeResult {
 /// Result of a fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitResult {
-    pub edges: [Option<EdgeResult>; 3],
+    pub edges: PerEdge<Option<EdgeResult>>,
     /// The tip's rotation relative to the starting normals (shared or tied edges),
     /// radians.
     pub turn: f64,
@@ -242,7 +245,7 @@ pub struct FitResult {
 impl FitResult {
     /// Each edge's residual noise (infinite where no edge was fitted): what a later fit
     /// of the same frame starts from (`noise0` of [`Refiner::fit`]).
-    pub fn noise(&self) -> [f64; 3] {
+    pub fn noise(&self) -> PerEdge<f64> {
         self.edges.map(|r| r.map_or(f64::INFINITY, |r| r.noise))
     }
 }
@@ -276,40 +279,40 @@ pub(super) const STRETCH_LEVEL_SIGMA: f64 = 40.0;
 pub struct Refiner {
     samples: Vec<Sample>,
     /// The samples of each edge (contiguous).
-    ranges: [std::ops::Range<usize>; 3],
+    ranges: PerEdge<std::ops::Range<usize>>,
     stretches: Stretches,
     /// Each edge's eight local parameters' places in the fit's (turn, offset, bend,
     /// blur, level, level slope, contrast, contrast slope).
-    slots: [[usize; 8]; 3],
+    slots: PerEdge<[usize; 8]>,
 }
 
 /// Per stretch of every band (see [`CHUNKS_PER_EDGE`]): whether it counts, its residual
 /// statistics, and its own outside level with what the last normal equations said of it.
 #[derive(Debug)]
 pub(super) struct Stretches {
-    pub ok: [bool; 3 * CHUNKS_PER_EDGE],
+    pub ok: [bool; EDGES * CHUNKS_PER_EDGE],
     /// Sum of squared residuals and samples, over every sample (counted or not).
-    pub sq: [f64; 3 * CHUNKS_PER_EDGE],
-    pub n: [u32; 3 * CHUNKS_PER_EDGE],
+    pub sq: [f64; EDGES * CHUNKS_PER_EDGE],
+    pub n: [u32; EDGES * CHUNKS_PER_EDGE],
     /// The stretch's outside level, relative to the edge's linear one (grey levels).
-    pub level: [f64; 3 * CHUNKS_PER_EDGE],
+    pub level: [f64; EDGES * CHUNKS_PER_EDGE],
     /// Normal-equation terms of `level`: its products with the edge's eight local
     /// parameters, with itself, and with the residuals (counted samples only).
-    pub row: [[f64; 8]; 3 * CHUNKS_PER_EDGE],
-    pub hh: [f64; 3 * CHUNKS_PER_EDGE],
-    pub g: [f64; 3 * CHUNKS_PER_EDGE],
+    pub row: [[f64; 8]; EDGES * CHUNKS_PER_EDGE],
+    pub hh: [f64; EDGES * CHUNKS_PER_EDGE],
+    pub g: [f64; EDGES * CHUNKS_PER_EDGE],
 }
 
 impl Default for Stretches {
     fn default() -> Self {
         Stretches {
-            ok: [true; 3 * CHUNKS_PER_EDGE],
-            sq: [0.0; 3 * CHUNKS_PER_EDGE],
-            n: [0; 3 * CHUNKS_PER_EDGE],
-            level: [0.0; 3 * CHUNKS_PER_EDGE],
-            row: [[0.0; 8]; 3 * CHUNKS_PER_EDGE],
-            hh: [0.0; 3 * CHUNKS_PER_EDGE],
-            g: [0.0; 3 * CHUNKS_PER_EDGE],
+            ok: [true; EDGES * CHUNKS_PER_EDGE],
+            sq: [0.0; EDGES * CHUNKS_PER_EDGE],
+            n: [0; EDGES * CHUNKS_PER_EDGE],
+            level: [0.0; EDGES * CHUNKS_PER_EDGE],
+            row: [[0.0; 8]; EDGES * CHUNKS_PER_EDGE],
+            hh: [0.0; EDGES * CHUNKS_PER_EDGE],
+            g: [0.0; EDGES * CHUNKS_PER_EDGE],
         }
     }
 }
@@ -320,7 +323,7 @@ impl Default for Refiner {
             samples: Vec::new(),
             ranges: [0..0, 0..0, 0..0],
             stretches: Stretches::default(),
-            slots: [[0; 8]; 3],
+            slots: [[0; 8]; EDGES],
         }
     }
 }
@@ -362,10 +365,10 @@ impl Refiner {
     pub fn fit(
         &mut self,
         frame: &GrayImage,
-        bands: &[Option<Band>; 3],
+        bands: &PerEdge<Option<Band>>,
         turns: Turns,
         blur0: f64,
-        noise0: Option<[f64; 3]>,
+        noise0: Option<PerEdge<f64>>,
         coarse: bool,
     ) -> Option<FitResult> {
         let shared = turns == Turns::Shared;
@@ -379,8 +382,8 @@ impl Refiner {
         };
         self.samples.clear();
         // Each band is strided down to at most max_samples plus one line's worth.
-        self.samples.reserve(3 * (MAX_SAMPLES_PER_EDGE + 1024));
-        let mut frames: [Option<EdgeFrame>; 3] = [None; 3];
+        self.samples.reserve(EDGES * (MAX_SAMPLES_PER_EDGE + 1024));
+        let mut frames: PerEdge<Option<EdgeFrame>> = [None; EDGES];
         for (e, band) in bands.iter().enumerate() {
             self.ranges[e] = 0..0;
             let Some(b) = band else { continue };
@@ -409,14 +412,14 @@ impl Refiner {
         self.init_photometry(&frames, &mut x);
         let weights = tip_weights(&frames, turns);
         // Infinite noise: no robust weights until the residuals have been seen.
-        let mut noise = noise0.unwrap_or([f64::INFINITY; 3]);
+        let mut noise = noise0.unwrap_or([f64::INFINITY; EDGES]);
         // Iterations the robust weights take to settle after the outlier stretches are
         // rejected (see DONE_TURN_SIGMAS): none when every edge starts from a measured
         // noise (an edge the earlier fit did not have starts unweighted).
-        let measured = (0..3).all(|e| frames[e].is_none() || noise[e].is_finite());
+        let measured = (0..EDGES).all(|e| frames[e].is_none() || noise[e].is_finite());
         let settling = if measured { 0 } else { 1 };
         let mut last = None;
-        self.stretches.ok = [true; 3 * CHUNKS_PER_EDGE];
+        self.stretches.ok = [true; EDGES * CHUNKS_PER_EDGE];
         for iter in 0..iterations_max {
             // The first iterations, far from the solution, on every other pixel.
             let step = if iter < subsampled { 2 } else { 1 };
@@ -430,7 +433,7 @@ impl Refiner {
                 let weight = pixel_weight(ne.noise[RED_BAND], b.bend_sigma, step);
                 prior(&mut ne, &x, &[P_BEND], b.bend0, weight);
             }
-            for e in (0..3).filter(|&e| frames[e].is_some()) {
+            for e in (0..EDGES).filter(|&e| frames[e].is_some()) {
                 let weight = pixel_weight(ne.noise[e], PROBE_SLOPE_SIGMA, step);
                 // The probe side's slope: level slope plus contrast slope.
                 let p0 = P_PHOTO + PHOTO * e;
@@ -537,7 +540,7 @@ impl Refiner {
     /// Marks the stretches whose residuals stand out from their edge's (see
     /// [`CHUNKS_PER_EDGE`]); uses the statistics of the last normal equations.
     fn reject_chunks(&mut self) {
-        for e in 0..3 {
+        for e in 0..EDGES {
             let range = e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE;
             let mut means = [0.0f64; CHUNKS_PER_EDGE];
             let mut n = 0;
@@ -564,9 +567,9 @@ impl Refiner {
 
     /// Starting levels: mean outside and inside the line, per edge, and each stretch's
     /// outside level relative to its edge's.
-    fn init_photometry(&mut self, frames: &[Option<EdgeFrame>; 3], x: &mut [f64; N_PARAMS]) {
-        let mut acc = [[0.0f64; 4]; 3];
-        let mut outside = [[0.0f64; 2]; 3 * CHUNKS_PER_EDGE];
+    fn init_photometry(&mut self, frames: &PerEdge<Option<EdgeFrame>>, x: &mut [f64; N_PARAMS]) {
+        let mut acc = [[0.0f64; 4]; EDGES];
+        let mut outside = [[0.0f64; 2]; EDGES * CHUNKS_PER_EDGE];
         // Stretch by stretch (a stretch's samples are consecutive, and of one edge), the
         // sums kept in registers meanwhile: summed in memory, each addition waited for
         // the store of the one before.
@@ -590,7 +593,7 @@ impl Refiner {
             acc[e] = [out_sum, out_n, in_sum, in_n];
             outside[c] = [own_sum, own_n];
         }
-        for e in 0..3 {
+        for e in 0..EDGES {
             let out = acc[e][0] / acc[e][1].max(1.0);
             let inside = acc[e][2] / acc[e][3].max(1.0);
             x[P_PHOTO + PHOTO * e] = out;
@@ -610,7 +613,7 @@ impl Refiner {
     /// substituted (the elimination of [`Stretches`] in reverse).
     fn step_levels(&mut self, before: &[f64; N_PARAMS], after: &[f64; N_PARAMS]) {
         let st = &mut self.stretches;
-        for e in 0..3 {
+        for e in 0..EDGES {
             let slots = self.slots[e];
             let delta: [f64; 8] = std::array::from_fn(|i| after[slots[i]] - before[slots[i]]);
             for c in e * CHUNKS_PER_EDGE..(e + 1) * CHUNKS_PER_EDGE {
@@ -698,8 +701,8 @@ fn prior(ne: &mut Normal, x: &[f64; N_PARAMS], ks: &[usize], mean: f64, weight: 
 /// Whether `step` moved every rotation and offset less than [`DONE_TURN_RAD`] and
 /// [`DONE_OFFSET_PX`].
 fn converged(step: &[f64; N_PARAMS]) -> bool {
-    (P_TURN..P_TURN + 3).all(|k| step[k].abs() < DONE_TURN_RAD)
-        && (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_OFFSET_PX)
+    (P_TURN..P_TURN + EDGES).all(|k| step[k].abs() < DONE_TURN_RAD)
+        && (P_OFFSET..P_OFFSET + EDGES).all(|k| step[k].abs() < DONE_OFFSET_PX)
 }
 
 /// Whether `step`, computed from `ne`, moved the tip's rotation (the rotations
@@ -707,7 +710,7 @@ fn converged(step: &[f64; N_PARAMS]) -> bool {
 /// this frame's noise and the offsets less than [`DONE_SHARED_OFFSET_PX`].
 fn converged_tip(step: &[f64; N_PARAMS], ne: &Normal, weights: &[f64; N_PARAMS]) -> bool {
     let turn: f64 = weights.iter().zip(step).map(|(w, s)| w * s).sum();
-    (P_OFFSET..P_OFFSET + 3).all(|k| step[k].abs() < DONE_SHARED_OFFSET_PX)
+    (P_OFFSET..P_OFFSET + EDGES).all(|k| step[k].abs() < DONE_SHARED_OFFSET_PX)
         && turn.abs() <= DONE_TURN_SIGMAS * turn_sigma(ne, weights)
 }
 
@@ -715,18 +718,18 @@ fn converged_tip(step: &[f64; N_PARAMS], ne: &Normal, weights: &[f64; N_PARAMS])
 /// or with tied edges the mean of the edges' rotations weighted by their calibration
 /// precision (the generalised least-squares estimate of the tip's rotation; see
 /// [`Turns::Tied`]). Free edges: the first edge in view's rotation.
-fn tip_weights(frames: &[Option<EdgeFrame>; 3], turns: Turns) -> [f64; N_PARAMS] {
+fn tip_weights(frames: &PerEdge<Option<EdgeFrame>>, turns: Turns) -> [f64; N_PARAMS] {
     let mut w = [0.0; N_PARAMS];
     match turns {
         Turns::Shared => w[P_TURN] = 1.0,
         Turns::Tied(t) => {
             let total = tie_precision(frames, &t.weigh);
-            for e in (0..3).filter(|&e| frames[e].is_some()) {
+            for e in (0..EDGES).filter(|&e| frames[e].is_some()) {
                 w[P_TURN + e] = tie_sigma(&t.weigh, e).powi(-2) / total;
             }
         }
         Turns::Free => {
-            if let Some(e) = (0..3).find(|&e| frames[e].is_some()) {
+            if let Some(e) = (0..EDGES).find(|&e| frames[e].is_some()) {
                 w[P_TURN + e] = 1.0;
             }
         }
@@ -742,12 +745,12 @@ fn tip_weights(frames: &[Option<EdgeFrame>; 3], turns: Turns) -> [f64; N_PARAMS]
 fn tie(
     ne: &mut Normal,
     x: &[f64; N_PARAMS],
-    frames: &[Option<EdgeFrame>; 3],
-    sigma: &[f64; 3],
+    frames: &PerEdge<Option<EdgeFrame>>,
+    sigma: &PerEdge<f64>,
     step: usize,
 ) {
     let noise = common_noise(ne);
-    let a: [f64; 3] = std::array::from_fn(|e| {
+    let a: PerEdge<f64> = std::array::from_fn(|e| {
         if frames[e].is_some() {
             pixel_weight(noise, tie_sigma(sigma, e), step)
         } else {
@@ -758,8 +761,8 @@ fn tie(
     if total <= 0.0 || !total.is_finite() {
         return;
     }
-    for i in 0..3 {
-        for j in 0..3 {
+    for i in 0..EDGES {
+        for j in 0..EDGES {
             let p = if i == j { a[i] } else { 0.0 } - a[i] * a[j] / total;
             ne.h[P_TURN + i][P_TURN + j] += p;
             ne.g[P_TURN + i] -= p * x[P_TURN + j];

@@ -10,13 +10,14 @@ use super::{
     P_BEND, P_BLUR, P_OFFSET, P_TURN,
 };
 use crate::vision::geometry::{dot, rotate, Line};
+use crate::vision::template::{PerEdge, EDGES};
 
 impl Refiner {
     /// The fit's result at the parameters `x` of the last normal equations `ne`, the
     /// tip's rotation made from the edges' with `weights`.
     pub(super) fn result(
         &self,
-        frames: &[Option<EdgeFrame>; 3],
+        frames: &PerEdge<Option<EdgeFrame>>,
         x: &[f64; N_PARAMS],
         ne: &Normal,
         turns: Turns,
@@ -28,9 +29,9 @@ impl Refiner {
         let robust = if turns == Turns::Free {
             self.clustered_turn_sigma(frames, x, ne)
         } else {
-            [0.0; 3]
+            [0.0; EDGES]
         };
-        let mut edges = [None; 3];
+        let mut edges = [None; EDGES];
         for (e, f) in frames.iter().enumerate() {
             let Some(f) = f else { continue };
             let turn = if shared { x[P_TURN] } else { x[P_TURN + e] };
@@ -59,7 +60,7 @@ impl Refiner {
                 turn_sigma_robust: turn_sigma.max(robust[e]),
             });
         }
-        let turn = (0..3).map(|e| weights[e] * x[P_TURN + e]).sum();
+        let turn = (0..EDGES).map(|e| weights[e] * x[P_TURN + e]).sum();
         // The calibration's share: the edges' calibration errors, averaged with the
         // weights that make the tip's rotation.
         let (turn_sigma, turn_error_sigma) = match turns {
@@ -89,10 +90,10 @@ impl Refiner {
     /// parameters' scores count.
     fn clustered_turn_sigma(
         &self,
-        frames: &[Option<EdgeFrame>; 3],
+        frames: &PerEdge<Option<EdgeFrame>>,
         x: &[f64; N_PARAMS],
         ne: &Normal,
-    ) -> [f64; 3] {
+    ) -> PerEdge<f64> {
         let shares = self.stretch_shares(frames, x, &ne.noise);
         let add = |h: &mut [[f64; N_PARAMS]; N_PARAMS],
                    s: &StretchShare,
@@ -113,12 +114,12 @@ impl Refiner {
             add(&mut bread, s, &s.psi, 1.0);
             add(&mut bread, s, &s.fitted, -1.0);
         }
-        let mut var = [0.0f64; 3];
+        let mut var = [0.0f64; EDGES];
         for s in &shares {
             let mut without = bread;
             add(&mut without, s, &s.psi, -1.0);
             let slots = self.slots[s.stretch / CHUNKS_PER_EDGE];
-            for e in (0..3).filter(|&e| frames[e].is_some()) {
+            for e in (0..EDGES).filter(|&e| frames[e].is_some()) {
                 let mut unit = [0.0; N_PARAMS];
                 unit[P_TURN + e] = 1.0;
                 var[e] += match solve(&without, &unit, &ne.fixed) {
@@ -155,7 +156,7 @@ pub(super) fn turn_sigma(ne: &Normal, weights: &[f64; N_PARAMS]) -> f64 {
 }
 
 /// Edge `e`'s calibration standard error as the tie takes it (radians).
-pub(super) fn tie_sigma(sigma: &[f64; 3], e: usize) -> f64 {
+pub(super) fn tie_sigma(sigma: &PerEdge<f64>, e: usize) -> f64 {
     if sigma[e].is_finite() {
         sigma[e].max(MIN_TIE_SIGMA_RAD)
     } else {
@@ -165,8 +166,8 @@ pub(super) fn tie_sigma(sigma: &[f64; 3], e: usize) -> f64 {
 
 /// The calibration's precision of the tip's rotation with tied edges: the sum of the
 /// edges in view's calibration precisions (radians^-2).
-pub(super) fn tie_precision(frames: &[Option<EdgeFrame>; 3], sigma: &[f64; 3]) -> f64 {
-    (0..3)
+pub(super) fn tie_precision(frames: &PerEdge<Option<EdgeFrame>>, sigma: &PerEdge<f64>) -> f64 {
+    (0..EDGES)
         .filter(|&e| frames[e].is_some())
         .map(|e| tie_sigma(sigma, e).powi(-2))
         .sum()
@@ -177,11 +178,11 @@ pub(super) fn tie_precision(frames: &[Option<EdgeFrame>; 3], sigma: &[f64; 3]) -
 /// make the tip's rotation ([`tip_weights`](super::tip_weights)), `sqrt(sum w_e^2 error_e^2)` (with the
 /// errors the weights come from, `1 / sqrt(tie_precision)`).
 pub(super) fn tie_error(
-    frames: &[Option<EdgeFrame>; 3],
+    frames: &PerEdge<Option<EdgeFrame>>,
     weights: &[f64; N_PARAMS],
-    error: &[f64; 3],
+    error: &PerEdge<f64>,
 ) -> f64 {
-    (0..3)
+    (0..EDGES)
         .filter(|&e| frames[e].is_some())
         .map(|e| (weights[P_TURN + e] * tie_sigma(error, e)).powi(2))
         .sum::<f64>()

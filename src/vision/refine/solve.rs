@@ -2,6 +2,7 @@
 //! scaled, damped Cholesky solve with held parameters, and the trust-limited step.
 
 use super::{N_PARAMS, P_BEND, P_BLUR, P_OFFSET, P_TURN};
+use crate::vision::template::{PerEdge, EDGES};
 
 /// Accumulated normal equations `h * step = g` of one iteration.
 #[derive(Debug, Clone, Copy)]
@@ -9,7 +10,7 @@ pub(super) struct Normal {
     pub h: [[f64; N_PARAMS]; N_PARAMS],
     pub g: [f64; N_PARAMS],
     pub fixed: [bool; N_PARAMS],
-    pub noise: [f64; 3],
+    pub noise: PerEdge<f64>,
 }
 
 impl Default for Normal {
@@ -18,7 +19,7 @@ impl Default for Normal {
             h: [[0.0; N_PARAMS]; N_PARAMS],
             g: [0.0; N_PARAMS],
             fixed: [false; N_PARAMS],
-            noise: [f64::INFINITY; 3],
+            noise: [f64::INFINITY; EDGES],
         }
     }
 }

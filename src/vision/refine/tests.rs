@@ -78,7 +78,7 @@ fn strip(top: f64, bottom: f64, blur: f64) -> GrayImage {
     })
 }
 
-fn strip_bands() -> [Option<Band>; 3] {
+fn strip_bands() -> PerEdge<Option<Band>> {
     let band = |rho: f64, normal: [f64; 2]| Some(straight_band(Line { normal, rho }, rho.abs()));
     // Inward normals: down from the top edge, up from the bottom one.
     [None, band(50.0, [0.0, 1.0]), band(-110.0, [0.0, -1.0])]
@@ -179,7 +179,7 @@ fn a_free_fits_robust_sigma_covers_a_background_correlated_along_its_edges() {
 
 /// The strip's fit with tied edges, each edge's calibration error `sigma` (radians)
 /// both weighing it and reported.
-fn tied_fit(img: &GrayImage, sigma: [f64; 3], noise0: Option<[f64; 3]>) -> FitResult {
+fn tied_fit(img: &GrayImage, sigma: PerEdge<f64>, noise0: Option<PerEdge<f64>>) -> FitResult {
     Refiner::default()
         .fit(
             img,

@@ -57,6 +57,8 @@ const MIN_RUN_PX: f64 = 2.0;
 /// The second apex edge is looked for over at least this many detection pixels from
 /// a candidate apex.
 const MIN_END_FACE_PX: f64 = 3.0;
+/// The most edges that vote: the two apex edges and the one farthest from the apex.
+const VOTING_EDGES: usize = 3;
 /// An edge gives the scale when it lies at least this far from the apex, reference
 /// pixels.
 const MIN_SCALE_OFFSET_PX: f64 = 2.0;
@@ -98,7 +100,7 @@ pub struct Search {
     /// bodies ruled out, so a frame searched again with more of them reuses them).
     within_scored: bool,
     /// Per voting edge, its gradient's direction in the reference (image angle).
-    directions: [f64; 3],
+    directions: [f64; VOTING_EDGES],
     /// Gradient magnitude a pixel needs to vote or support.
     threshold: f32,
 }
@@ -642,7 +644,7 @@ fn wrap_pi_f32(a: f32) -> f32 {
 /// its support ends places the apex when the other is faint, and a short edge's run
 /// says little), then the one farthest from the apex (its distance gives the scale),
 /// if any is.
-fn voting_edges(template: &RigidTemplate) -> ([usize; 3], usize) {
+fn voting_edges(template: &RigidTemplate) -> ([usize; VOTING_EDGES], usize) {
     let [a, b] = template.apex_edges;
     let [a, b] = if template.edges[b].length() > template.edges[a].length() {
         [b, a]
@@ -658,7 +660,7 @@ fn voting_edges(template: &RigidTemplate) -> ([usize; 3], usize) {
                 .total_cmp(&template.edges[b].offset.abs())
         });
     match far.filter(|&e| template.edges[e].offset.abs() >= MIN_SCALE_OFFSET_PX) {
-        Some(e) => ([a, b, e], 3),
+        Some(e) => ([a, b, e], VOTING_EDGES),
         None => ([a, b, a], 2),
     }
 }

@@ -10,7 +10,7 @@ use super::sampling::{
     Sampling, HELD_SHARE, HOLD_RATIO, INSIDE_SPREAD, MIN_CHECKED_PX, STATIONS,
 };
 use crate::vision::geometry::{add, dot, norm, scale, sub, Line};
-use crate::vision::template::{Pose, Template, BLUE, GREEN};
+use crate::vision::template::{PerEdge, Pose, Template, BLUE, GREEN};
 use crate::vision::Miss;
 
 /// How far either way of the predicted face its step is looked for, pixels.
@@ -452,7 +452,7 @@ pub fn faces_run_to_border(
     t: &Template,
     pose: &Pose,
     blur_px: f64,
-    calibrated: &[f64; 3],
+    calibrated: &PerEdge<f64>,
 ) -> bool {
     let size = [frame.width() as f64, frame.height() as f64];
     let s = Sampling::at_pose(t, pose, blur_px);

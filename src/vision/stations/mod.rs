@@ -33,7 +33,7 @@
 use image::GrayImage;
 
 use super::geometry::Line;
-use super::template::{Pose, Template, BLUE, GREEN, RED};
+use super::template::{PerEdge, Pose, Template, BLUE, EDGES, GREEN, RED};
 use super::{Edge, Miss};
 use beam::{free_end, lower_face};
 use faces::{
@@ -65,8 +65,8 @@ pub fn check_edges(
     t: &Template,
     pose: &Pose,
     blur_px: f64,
-    calibrated: &[f64; 3],
-    fitted: [bool; 3],
+    calibrated: &PerEdge<f64>,
+    fitted: PerEdge<bool>,
 ) -> Option<Miss> {
     let size = [frame.width() as f64, frame.height() as f64];
     let red = t.line(pose, RED);
@@ -78,10 +78,10 @@ pub fn check_edges(
     // within the slack when the fit left it out.
     let mut beam_edge = fitted[RED].then_some(red);
     // The faces whose corner is in view, for the turned-face check.
-    let mut faces: [Option<(Span, Profile, Option<Line>)>; 3] = [None; 3];
-    let mut shown_step = [1.0; 3];
+    let mut faces: PerEdge<Option<(Span, Profile, Option<Line>)>> = [None; EDGES];
+    let mut shown_step = [1.0; EDGES];
     // The far end of each edge's station span.
-    let mut far_end = [None; 3];
+    let mut far_end = [None; EDGES];
     // An unfitted beam edge whose slack reaches out of the frame, not found on the
     // shifts in view: refused if a face's base pins the scale (below).
     let mut red_unseen = None;

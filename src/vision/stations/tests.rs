@@ -76,11 +76,11 @@ fn a_beam_out_of_view_is_placed_beyond_the_border_and_the_faces_run_to_it() {
     assert!(scale > placed.scale && nearest_y(scale) < 6.5, "{scale}");
     assert!(nearest_y(scale - 0.02) >= 6.5, "{scale}");
     let out = Pose { scale, ..truth };
-    assert!(faces_run_to_border(&frame, &t, &out, 1.0, &[150.0; 3]));
+    assert!(faces_run_to_border(&frame, &t, &out, 1.0, &[150.0; EDGES]));
     // Faces ending 30 px below the border, 13 px short of the stretch the stations
     // cover: the pyramid is smaller than any scale that hides the beam.
     let short = probe_frame(&t, &truth, 30.0, true);
-    assert!(!faces_run_to_border(&short, &t, &out, 1.0, &[150.0; 3]));
+    assert!(!faces_run_to_border(&short, &t, &out, 1.0, &[150.0; EDGES]));
 }
 
 #[test]
@@ -147,7 +147,8 @@ fn a_face_ending_at_its_base_demands_the_beam_edge_in_view() {
             image::Luma([if pyramid || in_beam { 200 } else { 50 }])
         })
     };
-    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [false, true, true]);
+    let check =
+        |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; EDGES], [false, true, true]);
     assert_eq!(check(&frame(true, false)), None);
     assert_eq!(
         check(&frame(false, false)),
@@ -179,7 +180,8 @@ fn faces_disagreeing_on_the_scale_without_the_beam_edge_are_refused() {
             image::Luma([if pyramid || strip { 200 } else { 50 }])
         })
     };
-    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [false, true, true]);
+    let check =
+        |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; EDGES], [false, true, true]);
     assert_eq!(check(&frame(12.0, false)), Some(Miss::ScaleMismatch));
     // Both faces ending short agree with each other (and are refused for it);
     // both running on to the border leave the scale free.
@@ -234,7 +236,7 @@ fn a_face_hidden_at_the_apex_is_a_particle_only_while_the_apex_shows() {
         assert!(corner);
         profile(frame, &t.line(&pose, e), (a, b), Some(&partner), &s, 150.0).corner_held()
     };
-    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [true; 3]);
+    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; EDGES], [true; EDGES]);
     let touching = with_disc(19.0, 14.0, 14.0);
     let over = with_disc(10.0, 6.0, 18.0);
     for frame in [&touching, &over] {
@@ -255,8 +257,8 @@ fn a_face_losing_its_base_to_a_body_at_its_level_keeps_a_measured_scale() {
     let (tip, base) = t.segment(&pose, GREEN);
     let len = norm(sub(base, tip));
     let frame = disc_beside_face(GREEN, 0.85 * len, 0.1 * len, 0.2 * len);
-    let check = |fitted| check_edges(&frame, &t, &pose, 1.0, &[150.0; 3], fitted);
-    assert_eq!(check([true; 3]), None);
+    let check = |fitted| check_edges(&frame, &t, &pose, 1.0, &[150.0; EDGES], fitted);
+    assert_eq!(check([true; EDGES]), None);
     assert_eq!(check([false, true, true]), Some(Miss::ScaleMismatch));
 }
 
@@ -286,7 +288,7 @@ fn a_border_running_on_past_the_apex_is_not_a_face() {
         }
         frame
     };
-    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; 3], [true; 3]);
+    let check = |f: &GrayImage| check_edges(f, &t, &pose, 1.0, &[150.0; EDGES], [true; EDGES]);
     assert_eq!(check(&probe_frame(&t, &pose, 0.0, true)), None);
     assert_eq!(check(&with_patch(false)), None);
     assert_eq!(
@@ -388,7 +390,7 @@ fn a_tip_too_small_to_check_its_faces_is_refused() {
         apex: [220.0, 250.0],
     };
     let frame = probe_frame(&t, &pose, 0.0, true);
-    let miss = check_edges(&frame, &t, &pose, 1.0, &[150.0; 3], [true; 3]);
+    let miss = check_edges(&frame, &t, &pose, 1.0, &[150.0; EDGES], [true; EDGES]);
     assert_eq!(miss, Some(Miss::ScaleMismatch));
 }
 

@@ -10,7 +10,7 @@ use super::sampling::{
     MIN_CHECKED_PX, STATIONS,
 };
 use crate::vision::geometry::{add, norm, scale, strip_mean, sub, Line};
-use crate::vision::template::{Pose, Template, BLUE, GREEN};
+use crate::vision::template::{PerEdge, Pose, Template, BLUE, GREEN};
 
 /// A face's line steps on past the apex when its step keeps, at every station there,
 /// the level of the face's far side within this share of the calibrated step.
@@ -105,7 +105,7 @@ pub(super) fn apex_covered(
     t: &Template,
     pose: &Pose,
     s: &Sampling,
-    faces: &[Option<(Span, Profile, Option<Line>)>; 3],
+    faces: &PerEdge<Option<(Span, Profile, Option<Line>)>>,
 ) -> bool {
     let inward = add(t.line(pose, BLUE).normal, t.line(pose, GREEN).normal);
     let len = norm(inward);
