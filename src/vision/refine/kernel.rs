@@ -92,8 +92,10 @@ impl Refiner {
             }
         }
         if shared {
-            ne.fixed[P_TURN + 1] = true;
-            ne.fixed[P_TURN + 2] = true;
+            // One rotation for all: the first edge's.
+            for e in 1..EDGES {
+                ne.fixed[P_TURN + e] = true;
+            }
         }
         if !frames.iter().flatten().any(|f| f.curved) {
             ne.fixed[P_BEND] = true;

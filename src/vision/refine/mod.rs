@@ -30,7 +30,7 @@
 use image::GrayImage;
 
 use super::geometry::{along, dot, sub, Line};
-use super::template::{PerEdge, EDGES};
+use super::template::{PerEdge, EDGES, RED};
 
 mod gauss;
 mod kernel;
@@ -151,9 +151,6 @@ impl Band {
 
 /// The outer part of a band (pixels) where only every other pixel is fitted.
 const LEVEL_ONLY_PX: f64 = 2.0;
-
-/// The band that may carry a bend (the beam edge).
-const RED_BAND: usize = 0;
 
 /// The bend coefficient is the offset of the beam edge from its free-end tangent at this
 /// distance beyond the start of the bend, pixels.
@@ -408,7 +405,7 @@ impl Refiner {
         }
         let mut x = [0.0; N_PARAMS];
         x[P_BLUR] = blur0;
-        x[P_BEND] = bands[RED_BAND].map_or(0.0, |b| b.bend0);
+        x[P_BEND] = bands[RED].map_or(0.0, |b| b.bend0);
         self.init_photometry(&frames, &mut x);
         let weights = tip_weights(&frames, turns);
         // Infinite noise: no robust weights until the residuals have been seen.
@@ -429,8 +426,8 @@ impl Refiner {
             }
             // Expectations as observations, weighted like the pixels (whose sums the
             // normal equations hold): the physics' bend, and the slow shading.
-            if let Some(b) = bands[RED_BAND].filter(|b| b.bend_sigma.is_finite()) {
-                let weight = pixel_weight(ne.noise[RED_BAND], b.bend_sigma, step);
+            if let Some(b) = bands[RED].filter(|b| b.bend_sigma.is_finite()) {
+                let weight = pixel_weight(ne.noise[RED], b.bend_sigma, step);
                 prior(&mut ne, &x, &[P_BEND], b.bend0, weight);
             }
             for e in (0..EDGES).filter(|&e| frames[e].is_some()) {
