@@ -1,7 +1,7 @@
 //! Fault injection at the daemon level: the real threads, slots and haptic loop, with
-//! fake devices whose failures the test switches on and off. Each safety rule of the
-//! daemon issue has a test here (the teleoperation law's own rules are unit-tested in
-//! `src/control/tests.rs`).
+//! fake devices whose failures the test switches on and off. Each of the daemon's safety
+//! rules (docs/operations.md) has a test here (the teleoperation law's own rules are
+//! unit-tested in `src/control/tests.rs`).
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

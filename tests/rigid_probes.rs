@@ -274,8 +274,8 @@ fn measure(kind: ToolKind) -> Measured {
     m
 }
 
-/// Bounds measured on the default seed (and the held-out seed 97), below the issue's
-/// targets where the tracker does not reach them yet (docs/rigid-probes.md): detection
+/// Bounds measured on the default seed (and the held-out seed 97), below the targets
+/// where the tracker does not reach them yet (docs/rigid-probes.md): detection
 /// 99.3-100 % (held-out 99.7-100 %), no false detection at the scales the lab states,
 /// up to 0.7 % of detections beyond 4 sigma.
 const MIN_DETECTION: f64 = 0.993;

@@ -1,11 +1,13 @@
 //! End to end: the built-in simulated lab through the real daemon (threads, tracker,
-//! haptic loop, simulated S100, SEM and operator), checked against the daemon issue's
-//! targets. Release build, 640x480. The shipped lab (60 Hz) for 12 s, the lab of two
-//! probes on two positioners (config/sim-two-probes.toml) for 12 s, a cantilever beside
-//! a rigid needle (config/sim-needle.toml) for 12 s, then short runs at SEM frame rates
-//! of 12, 24 and 60 frames per second with 20 and 80 ms from capture to arrival, and a
-//! slow scan. The tests of this binary take turns (one lock), so nothing
-//! else competes for the two cores while one runs.
+//! haptic loop, simulated S100, SEM and operator), checked against the lab's targets
+//! (docs/performance.md: force RMS error <= 2 % and max <= 5 % of the true peak, the
+//! haptic period and the frame latency). Release build, 640x480. The shipped lab
+//! (60 Hz) for 12 s, the lab of two probes on two positioners
+//! (config/sim-two-probes.toml) for 12 s, a cantilever beside a rigid needle
+//! (config/sim-needle.toml) for 12 s, then short runs at SEM frame rates of 12, 24 and
+//! 60 frames per second with 20 and 80 ms from capture to arrival, and a slow scan. The
+//! tests of this binary take turns (one lock), so nothing else competes for the two
+//! cores while one runs.
 use std::path::Path;
 use std::sync::atomic::Ordering;
 use std::sync::Mutex;

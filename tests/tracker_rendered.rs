@@ -88,25 +88,20 @@ fn suite_of_600_rendered_frames() {
     assert!(sc.positives >= 550, "{why}");
     assert!(sc.detect_rate >= 0.998, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    // Measured 0.0110, 0.0734 and 0.066 px since the final fit starts from the coarse
-    // pass's noise and stops sooner; 0.0110, 0.0752 and 0.067 px with the edges tied by
-    // their calibration errors (0.0111, 0.0753 and 0.070 before; 0.0115, 0.082 and 0.076
-    // before each stretch of a band had its own outside level).
+    // Measured: angle error median 0.0110 deg, p95 0.0735 deg, apex median 0.066 px.
     assert!(sc.angle_err_median_deg <= 0.0115, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.078, "{why}");
     // The worst frames are harsh ones whose error is 2-3 times the fit's own standard
     // error (Estimate::angle_sigma_deg, 0.07-0.1 deg there): noise, not a failure
-    // (docs/tracker.md, Accuracy). Measured 0.327, 0.265 since the prior on the probe
-    // side's shading, 0.235 since the stretches' own outside levels.
+    // (docs/tracker.md, Accuracy). Measured 0.234 deg.
     assert!(sc.angle_err_max_deg <= 0.25, "{why}");
     assert!(sc.tip_err_median_px <= 0.072, "{why}");
     // Measured (median, p95): clean 0.0039, 0.014; clutter 0.0098, 0.043; noisy
-    // 0.0145, 0.049; harsh 0.0277, 0.124 (harsh 0.0275, 0.121 before the final fit
-    // started from the coarse pass's noise and stopped sooner). The reported standard
-    // error is honest on every look: the RMS of error / sigma (sigma includes the
-    // calibration's share since the edges are tied by it) measured clean 1.09, clutter
-    // 1.16, noisy 1.05, harsh 1.01 (clean 1.94 and clutter 1.25 when sigma was the
-    // frame's noise alone).
+    // 0.0146, 0.049; harsh 0.0277, 0.124. The reported standard error is honest on
+    // every look: the RMS of error / sigma (sigma includes the calibration's share, the
+    // edges being tied by their calibration errors) measured clean 0.85, clutter 1.04,
+    // noisy 0.96, harsh 0.93; with the frame's noise alone as sigma, clean frames
+    // would understate their error about twice.
     for (style, median, p95) in [
         ("clean", 0.0042, 0.017),
         ("clutter", 0.0105, 0.045),
@@ -361,9 +356,7 @@ fn coherence_is_a_shortcut_never_a_dependency() {
         assert_eq!(sc.detect_rate, 1.0, "{why}");
         assert_eq!(sc.false_detections, 0, "{why}");
         // This sequence is harsh throughout (noise 30, blur 1.5): the hardest look.
-        // Measured p95 0.213 and max 0.302; since the prior on the probe side's
-        // shading 0.176 and 0.344 (frames above 0.2 deg: 15 -> 4, one frame worse);
-        // since the stretches' own outside levels 0.146 and 0.266.
+        // Measured p95 0.144 (0.146 shuffled) and max 0.266 deg.
         assert!(
             sc.angle_err_p95_deg <= 0.155 && sc.angle_err_max_deg <= 0.28,
             "{why}"

@@ -27,15 +27,11 @@ fn mixed_sample_in_random_order() {
     let why = format!("{sc:?}\n{}", table(&s.truth, &est));
     assert_eq!(sc.detect_rate, 1.0, "{why}");
     assert_eq!(sc.false_detections, 0, "{why}");
-    // Measured 0.0296, 0.0967, 0.221 deg, RMS 0.0599 deg and 0.66 px since the final
-    // fit starts from the coarse pass's noise; 0.0301, 0.0970, 0.223, 0.0600 and 0.66
-    // with the edges tied by their calibration errors; 0.0298, 0.0988, 0.223, 0.0625
-    // and 0.66 before (0.042, 0.123, 0.252 before each stretch of a band had its own
-    // outside level). The median target is 0.03: the median of these 30 frames
-    // is the mean of the 15th and 16th errors, which the tie moved by 0.00003 and
-    // 0.0004 deg while it brought 23 frames' errors down (frame 9's 0.081 -> 0.049), so
-    // the RMS holds the change to its gain, and the median to within 0.001 of the
-    // target.
+    // Measured: angle error median 0.0296 deg, p95 0.0967, max 0.221, RMS 0.0599 deg,
+    // apex median 0.66 px. The median of these 30 frames is the mean of the 15th and
+    // 16th errors, and a change that lowers most frames' errors can move it by a few
+    // ten-thousandths either way: the median is held within 0.001 deg of the 0.03 deg
+    // target, the RMS to its measured value.
     assert!(sc.angle_err_median_deg <= 0.031, "{why}");
     assert!(sc.angle_err_p95_deg <= 0.10, "{why}");
     assert!(sc.angle_err_max_deg <= 0.235, "{why}");
@@ -51,10 +47,8 @@ fn sequence_sample_with_and_without_coherence() {
         let sc = score(&s.truth, &est);
         let why = format!("coherence {coherence}: {sc:?}\n{}", table(&s.truth, &est));
         assert_eq!(sc.detect_rate, 1.0, "{why}");
-        // Measured 0.0196, 0.0542, 0.081 deg and 0.555 px since the final fit starts
-        // from the coarse pass's noise and stops sooner; 0.0188, 0.0547, 0.080, 0.554
-        // with the edges tied by their calibration errors (0.0189, 0.0545, 0.080, 0.553
-        // before; 0.020, 0.062, 0.085 before the stretches' own outside levels).
+        // Measured: angle error median 0.0196 deg, p95 0.0542, max 0.081, apex median
+        // 0.555 px.
         assert!(sc.angle_err_median_deg <= 0.020, "{why}");
         assert!(sc.angle_err_p95_deg <= 0.058, "{why}");
         assert!(sc.angle_err_max_deg <= 0.085, "{why}");
@@ -118,8 +112,9 @@ fn apex_in_the_samples_convention_calibrated_on_the_other_session() {
     // The samples' truth counts pixels from the top-left pixel's corner, and its
     // outline lies inside the imaged edges (docs/tracker.md, Public samples). Written
     // with pixel_origin = "corner", the edge bias fitted on one session brings the
-    // other session's apex median well under the 0.5 px: an instrument
-    // calibration that transfers between two probes, not a fit to the frames scored.
+    // other session's apex median well under the 0.5 px target (docs/tracker.md): an
+    // instrument calibration that transfers between two probes, not a fit to the
+    // frames scored.
     let sessions = [sample("mixed"), sample("sequence")];
     let apexes = sessions.each_ref().map(corner_apexes);
     let bias = [0, 1].map(|k| fitted_bias(&sessions[k], &apexes[k]));

@@ -104,7 +104,7 @@ pub struct RunStats {
     pub frames: FrameStats,
     pub force: ForceStats,
     pub safety: SafetyStats,
-    /// Resident memory of the process (an addition to the daemon issue's schema).
+    /// Resident memory of the process.
     pub memory: MemoryStats,
     /// How the run ended.
     pub stop: StopStats,

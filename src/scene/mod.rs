@@ -1,6 +1,6 @@
-//! Synthetic SEM frames with ground truth (issue 3): the SEM scene of docs/renderer.md
-//! rendered from a seed, for the tracker's accuracy tests, the simulated lab, benches and
-//! the demo.
+//! Synthetic SEM frames with ground truth: the SEM scene of docs/renderer.md rendered
+//! from a seed, for the tracker's accuracy tests, the simulated lab, benches and the
+//! demo.
 //!
 //! A [`FrameSpec`] fixes everything about a frame: size, magnification, the probe
 //! ([`ProbeGeometry`]: an elastica-bent beam with a rigid pyramid), its pose (entry side,
