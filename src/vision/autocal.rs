@@ -37,6 +37,7 @@ use image::GrayImage;
 use super::calibration::SYMMETRIC_BASES;
 use super::geometry::{add, bilinear, dot, norm, principal_axis, scale, sub, unit, Line};
 use super::options::{CalibrationConfig, TrackerConfig};
+use super::pyramid::otsu_from;
 use super::{Calibration, VisionError};
 
 /// Radius of the ring around the apex on which the pyramid's arc is found, pixels.
@@ -758,38 +759,17 @@ pub fn find_apex(img: &GrayImage) -> Result<[f64; 2], AutoCalError> {
 /// Otsu's level over all grey levels (the probe being the brightest).
 pub fn body_levels(img: &GrayImage) -> [usize; 2] {
     let hist = histogram(img);
-    let all = otsu(&hist, 0);
-    [otsu(&hist, all + 1), all]
+    let all = otsu_from(&hist, 0);
+    [otsu_from(&hist, all + 1), all]
 }
 
 /// The grey levels' histogram.
-fn histogram(img: &GrayImage) -> [u64; 256] {
-    let mut hist = [0u64; 256];
+fn histogram(img: &GrayImage) -> [u32; 256] {
+    let mut hist = [0u32; 256];
     for p in img.pixels() {
         hist[p[0] as usize] += 1;
     }
     hist
-}
-
-/// Otsu's level over the grey levels from `from` up.
-fn otsu(hist: &[u64; 256], from: usize) -> usize {
-    let total: f64 = hist[from..].iter().map(|&c| c as f64).sum();
-    let sum: f64 = (from..256).map(|i| i as f64 * hist[i] as f64).sum();
-    let (mut w0, mut s0, mut best, mut level) = (0.0, 0.0, -1.0, from);
-    for (i, &count) in hist.iter().enumerate().skip(from) {
-        w0 += count as f64;
-        s0 += i as f64 * count as f64;
-        let w1 = total - w0;
-        if w0 == 0.0 || w1 == 0.0 {
-            continue;
-        }
-        let between = w0 * w1 * (s0 / w0 - (sum - s0) / w1).powi(2);
-        if between > best {
-            best = between;
-            level = i;
-        }
-    }
-    level.min(254)
 }
 
 /// The largest body touching a frame side, and the axis it enters along.
@@ -917,15 +897,6 @@ fn with_axis(body: &[usize], w: usize, h: usize) -> EnteringBody {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn otsu_splits_two_levels_between_them() {
-        let mut hist = [0u64; 256];
-        hist[60] = 900;
-        hist[200] = 100;
-        let level = otsu(&hist, 0);
-        assert!((60..200).contains(&level), "{level}");
-    }
 
     #[test]
     fn a_flat_image_has_no_pyramid() {

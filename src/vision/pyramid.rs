@@ -362,14 +362,18 @@ fn bin_body(
 /// Otsu's threshold of a 256-bin histogram: the level maximising the between-class
 /// variance (pixels `<= level` form the dark class).
 pub fn otsu(hist: &[u32; 256]) -> u8 {
-    let total: f64 = hist.iter().map(|&h| h as f64).sum();
-    let sum_all: f64 = hist
-        .iter()
-        .enumerate()
-        .map(|(i, &h)| i as f64 * h as f64)
-        .sum();
-    let (mut w0, mut sum0, mut best, mut best_level) = (0.0, 0.0, -1.0, 0u8);
-    for (level, &h) in hist.iter().enumerate() {
+    // At most 254: the bright class is never empty.
+    otsu_from(hist, 0) as u8
+}
+
+/// Otsu's threshold over the grey levels from `from` up: the level at or above `from`
+/// maximising the between-class variance of those levels (`from` when no level splits
+/// them, 254 at most).
+pub fn otsu_from(hist: &[u32; 256], from: usize) -> usize {
+    let total: f64 = hist[from..].iter().map(|&h| h as f64).sum();
+    let sum_all: f64 = (from..256).map(|i| i as f64 * hist[i] as f64).sum();
+    let (mut w0, mut sum0, mut best, mut best_level) = (0.0, 0.0, -1.0, from);
+    for (level, &h) in hist.iter().enumerate().skip(from) {
         w0 += h as f64;
         sum0 += level as f64 * h as f64;
         let w1 = total - w0;
@@ -380,10 +384,10 @@ pub fn otsu(hist: &[u32; 256]) -> u8 {
         let between = w0 * w1 * diff * diff;
         if between > best {
             best = between;
-            best_level = level as u8;
+            best_level = level;
         }
     }
-    best_level
+    best_level.min(254)
 }
 
 #[cfg(test)]
@@ -398,6 +402,20 @@ mod tests {
         hist[200] = 300;
         let t = otsu(&hist);
         assert!((61..200).contains(&t), "{t}");
+    }
+
+    #[test]
+    fn otsu_from_splits_only_the_levels_from_it_up() {
+        let mut hist = [0u32; 256];
+        hist[60] = 900;
+        hist[150] = 300;
+        hist[220] = 100;
+        let all = otsu_from(&hist, 0);
+        assert!((60..150).contains(&all), "{all}");
+        let bright = otsu_from(&hist, all + 1);
+        assert!((150..220).contains(&bright), "{bright}");
+        // Nothing to split from 221 up: the level asked from.
+        assert_eq!(otsu_from(&hist, 221), 221);
     }
 
     #[test]
