@@ -1,7 +1,7 @@
 //! The run's statistics as the stats JSON reports them, assembled from what the loops
 //! and the recorder counted.
 
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::daemon::haptic_loop::{LoopReport, LoopShared};
 use crate::daemon::pipeline::{PipelineShared, TrackerReport};
@@ -37,6 +37,10 @@ pub(super) fn assemble_stats(
     let ticks = loop_report.map_or(0, |r| r.ticks);
     let periods = loop_report.map(|r| &r.periods_us);
     let latency = tracker.map(|t| &t.latency_ms);
+    // A count from the loop's report when it ended, else its live counter.
+    let counted = |live: &AtomicU64, reported: fn(&LoopReport) -> u64| {
+        loop_report.map_or_else(|| live.load(Ordering::Relaxed), reported)
+    };
     RunStats {
         duration_s,
         haptic_loop: LoopStats {
@@ -58,22 +62,10 @@ pub(super) fn assemble_stats(
         },
         force: ForceStats::from_errors(probe(0).and_then(|p| p.force.as_ref())),
         safety: SafetyStats {
-            stale_events: loop_report.map_or_else(
-                || loop_shared.stale_events.load(Ordering::Relaxed),
-                |r| r.counters.stale_events,
-            ),
-            faults: loop_report.map_or_else(
-                || loop_shared.faults.load(Ordering::Relaxed),
-                |r| r.counters.faults,
-            ),
-            gate_held: loop_report.map_or_else(
-                || loop_shared.gate_held.load(Ordering::Relaxed),
-                |r| r.gate.held,
-            ),
-            gate_attenuated: loop_report.map_or_else(
-                || loop_shared.gate_attenuated.load(Ordering::Relaxed),
-                |r| r.gate.attenuated,
-            ),
+            stale_events: counted(&loop_shared.stale_events, |r| r.counters.stale_events),
+            faults: counted(&loop_shared.faults, |r| r.counters.faults),
+            gate_held: counted(&loop_shared.gate_held, |r| r.gate.held),
+            gate_attenuated: counted(&loop_shared.gate_attenuated, |r| r.gate.attenuated),
         },
         memory: MemoryStats::default(),
         stop: StopStats::default(),

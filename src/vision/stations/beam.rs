@@ -21,6 +21,13 @@ const FOUND_RATIO: f64 = 0.5;
 const SCAN_STEP_PX: i64 = 5;
 const SCAN_RATIO: f64 = 0.3;
 
+/// The beam edge's distance from the apex per unit of scale, reference pixels; `None`
+/// for a template whose beam edge passes through the apex (no scale moves it).
+fn beam_distance_per_scale(t: &Template) -> Option<f64> {
+    let per_scale = t.edges[RED].offset.abs();
+    (per_scale >= 1e-9).then_some(per_scale)
+}
+
 /// The scale at which the frame shows the beam edge, for a tip the fit placed from
 /// its two faces alone and refused there: the faces fix the apex and the rotation,
 /// and the scale only moves the beam edge parallel to itself, away from the apex.
@@ -39,11 +46,7 @@ pub fn beam_edge_scale(
     red_step: f64,
 ) -> Option<f64> {
     let size = [frame.width() as f64, frame.height() as f64];
-    // The beam edge's distance from the apex per unit of scale.
-    let per_scale = t.edges[RED].offset.abs();
-    if per_scale < 1e-9 {
-        return None;
-    }
+    let per_scale = beam_distance_per_scale(t)?;
     let unit = Pose {
         scale: 1.0,
         ..*pose
@@ -119,10 +122,7 @@ pub fn beam_out_of_view_scale(
     blur_px: f64,
 ) -> Option<f64> {
     let size = [frame.width() as f64, frame.height() as f64];
-    let per_scale = t.edges[RED].offset.abs();
-    if per_scale < 1e-9 {
-        return None;
-    }
+    let per_scale = beam_distance_per_scale(t)?;
     // The nearest the beam edge may lie to its predicted line is the slack's share
     // closer to the apex: its whole stretch, so placed, must be out of view.
     let nearer = 1.0 - RED_SLACK;
