@@ -13,7 +13,7 @@ pub(super) enum SignalEvent {
 
 pub(super) struct Signals {
     /// SIGHUP, then each of [`STOP_SIGNALS`].
-    pub(super) streams: Vec<tokio::signal::unix::Signal>,
+    streams: Vec<tokio::signal::unix::Signal>,
 }
 
 impl Signals {

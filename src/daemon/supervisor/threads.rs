@@ -33,22 +33,22 @@ const ESTIMATE_RING: usize = 1024;
 /// `Threads` with the haptic loop still in it (the supervisor itself panicked) stops
 /// everything the same way, outputs first.
 pub(super) struct Threads {
-    pub(super) frames: Option<JoinHandle<()>>,
-    pub(super) tracker: Option<JoinHandle<TrackerReport>>,
-    pub(super) haptic: Option<JoinHandle<LoopReport>>,
-    pub(super) recorder: Option<(JoinHandle<std::io::Result<()>>, Arc<AtomicBool>)>,
-    pub(super) frame_recorder: Option<FrameRecorder>,
+    frames: Option<JoinHandle<()>>,
+    tracker: Option<JoinHandle<TrackerReport>>,
+    haptic: Option<JoinHandle<LoopReport>>,
+    recorder: Option<(JoinHandle<std::io::Result<()>>, Arc<AtomicBool>)>,
+    frame_recorder: Option<FrameRecorder>,
     pub(super) events: mpsc::Sender<String>,
     pub(super) gains: rtrb::Producer<TeleopGains>,
     pub(super) monitor: Option<MonitorHandle>,
     pub(super) stream: Option<StreamHandle>,
-    pub(super) loop_shared: Arc<LoopShared>,
-    pub(super) pipeline_shared: Arc<PipelineShared>,
+    loop_shared: Arc<LoopShared>,
+    pipeline_shared: Arc<PipelineShared>,
     /// Set once the haptic loop has ended (its outputs zeroed, forces off).
     pub(super) outputs_zeroed: Arc<AtomicBool>,
     /// The probes' names, in order.
     pub(super) probe_names: Vec<String>,
-    pub(super) session_dir: Option<PathBuf>,
+    session_dir: Option<PathBuf>,
 }
 
 impl Drop for Threads {

@@ -129,7 +129,7 @@ impl Profile {
 
     /// Whether station `k`'s inside lies within `share` of the calibrated step of
     /// `level`.
-    pub(super) fn inside_within(&self, k: usize, level: f64, share: f64) -> bool {
+    fn inside_within(&self, k: usize, level: f64, share: f64) -> bool {
         (self.inside[k] - level).abs() <= share * self.step.abs()
     }
 
@@ -142,7 +142,7 @@ impl Profile {
 
     /// Whether every station of `stations` keeps, on the probe's side, the probe's
     /// level along the rest of the edge ([`COVERED_LEVEL`]).
-    pub(super) fn inside_probe_over(&self, mut stations: std::ops::Range<usize>) -> bool {
+    fn inside_probe_over(&self, mut stations: std::ops::Range<usize>) -> bool {
         let probe_level = self.held_level();
         stations.all(|k| self.at_probe_level(k, probe_level))
     }
@@ -180,7 +180,7 @@ impl Profile {
     }
 
     /// Median of `value` over the stations that show the edge (0 when none does).
-    pub(super) fn held_median(&self, value: impl Fn(usize) -> f64) -> f64 {
+    fn held_median(&self, value: impl Fn(usize) -> f64) -> f64 {
         let mut held = [0.0; STATIONS];
         let mut m = 0;
         for k in (0..self.stations).filter(|&k| self.held(k)) {
@@ -304,7 +304,7 @@ pub(super) type Span = ([f64; 2], [f64; 2]);
 /// Where the [`STATIONS`] stations of a span lie: evenly along it, each averaging
 /// `along` pixels either side of its centre.
 pub(super) struct Placement {
-    pub(super) a: [f64; 2],
+    a: [f64; 2],
     pub(super) dir: [f64; 2],
     pub(super) len: f64,
     pub(super) along: i64,
