@@ -23,8 +23,8 @@ use nanoforce::scene::adversarial::{self, Adversary, Decoy};
 use nanoforce::scene::rng::{sub_seed, Rng};
 use nanoforce::scene::{self, render_tool_into, tool_suite, ToolKind, ToolSession, TOOL_MAG_RATIO};
 use nanoforce::vision::{
-    auto_calibrate_rigid, calibrate_rigid, Estimate, RigidPose, RigidTemplate, RigidTracker,
-    ScaleRange, DEFAULT_WINDOW_DEG, RIGID_SCALES,
+    auto_calibrate_rigid, calibrate_rigid, Estimate, Pose, RigidTemplate, RigidTracker, ScaleRange,
+    DEFAULT_WINDOW_DEG, RIGID_SCALES,
 };
 use tracker_support::rendered::real_crops;
 
@@ -164,7 +164,7 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
                     spec.magnification / session.reference.magnification
                 );
             }
-            let truth_pose = RigidPose {
+            let truth_pose = Pose {
                 psi: -truth.angle_deg.to_radians(),
                 scale: spec.magnification / session.reference.magnification,
                 apex: truth.apex_px,

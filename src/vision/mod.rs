@@ -78,10 +78,11 @@ pub use probes::{
 };
 pub use rigid::{
     auto_calibrate as auto_calibrate_rigid, calibrate as calibrate_rigid,
-    find_tip_points as rigid_tip_points, Pose as RigidPose, RigidAutoClicks, RigidEdge, RigidError,
-    RigidTemplate, RigidTracker, MAX_EDGES, RIGID_SCALES,
+    find_tip_points as rigid_tip_points, RigidAutoClicks, RigidEdge, RigidError, RigidTemplate,
+    RigidTracker, MAX_EDGES, RIGID_SCALES,
 };
 pub use simd::set_avx2;
+pub use template::Pose;
 pub use tracker::Tracker;
 
 /// The three tracked edges of the tip (the paper's red, blue and green lines).

@@ -73,10 +73,11 @@ pub struct Template {
     pub beam_px: Option<f64>,
 }
 
-/// Where the template sits in a frame.
+/// Where a probe's template sits in a frame: an AFM tip's ([`Template`]) or a rigid
+/// probe's (`RigidTemplate`, which places its edges with `Pose::place`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pose {
-    /// Tip rotation from the reference, image radians.
+    /// Rotation from the reference, image radians.
     pub psi: f64,
     /// Frame pixels per reference pixel.
     pub scale: f64,

@@ -32,6 +32,7 @@ pub use fit::MAX_EDGES;
 use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
 use super::geometry::{add, along, rotate, scale, screen_deg_from_image_rad};
 use super::pyramid::Pyramid;
+use super::template::Pose;
 use super::{EdgeFit, EdgeName, Estimate, Miss, ScaleRange};
 use fit::{Fit, Fitter};
 use search::Search;
@@ -99,19 +100,8 @@ pub struct RigidTemplate {
     pub angle_sigma_rad: f64,
 }
 
-/// Where the template sits in a frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Pose {
-    /// Rotation from the reference, image radians.
-    pub psi: f64,
-    /// Frame pixels per reference pixel.
-    pub scale: f64,
-    /// The apex, frame pixels.
-    pub apex: [f64; 2],
-}
-
 impl Pose {
-    /// Edge `e`'s point at `tau` (reference pixels along it) in the frame.
+    /// A rigid probe's edge `edge` at `tau` (reference pixels along it) in the frame.
     pub fn place(&self, edge: &RigidEdge, tau: f64) -> [f64; 2] {
         add(
             self.apex,
