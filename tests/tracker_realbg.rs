@@ -36,13 +36,24 @@ fn suite_of_600_frames_over_real_backgrounds() {
     if std::env::var("SUITE_TABLE").is_ok() {
         println!("{}", table(&t, &e));
     }
+    // Each missed probe frame is fitted from its true pose too: detected there, the
+    // search missed it; refused there, the verification refuses the frame itself.
+    let from_truth = rendered::misses_from_truth(&sessions, &crops, &t, &e);
     for (i, (ti, ei)) in t.iter().zip(&e).enumerate() {
         if ti.detected != ei.detected {
             let look = &sessions[i / 50].frames[i % 50].look;
             let real = look.real.expect("a real background");
+            let at_truth =
+                from_truth
+                    .iter()
+                    .find(|(j, _)| *j == i)
+                    .map_or(String::new(), |(_, a)| match a.miss {
+                        Some(m) => format!("; from the true pose too: {}", m.name()),
+                        None => "; the true pose verifies".into(),
+                    });
             println!(
                 "s{:02} f{:02} in view {} mag {:5.0}: contrast {:+5.1} noise {:4.1} texture {:4.1} \
-                 level {:5.1} gain {:.2} jitter {:.2} needle {} -> conf {:.2} miss {}",
+                 level {:5.1} gain {:.2} jitter {:.2} needle {} -> conf {:.2} miss {}{at_truth}",
                 i / 50,
                 i % 50,
                 ti.detected,
@@ -59,6 +70,11 @@ fn suite_of_600_frames_over_real_backgrounds() {
             );
         }
     }
+    let by_search = from_truth.iter().filter(|(_, a)| a.detected).count();
+    println!(
+        "missed probe frames: {} ({by_search} the search's: the true pose verifies)",
+        from_truth.len()
+    );
     if let Ok(dir) = std::env::var("SUITE_DUMP") {
         // The frames missed or falsely detected, as PNGs named by session and frame.
         std::fs::create_dir_all(&dir).unwrap_or_else(|err| panic!("SUITE_DUMP={dir}: {err}"));

@@ -14,6 +14,7 @@
 use super::candidates::{Candidate, Candidates};
 use super::edges::EdgeMap;
 use super::geometry::{add, along, clip_to_rect, dot, norm, rotate, scale, sub, wrap_pi};
+use super::pyramid::Pyramid;
 use super::template::{PerEdge, Pose, Template, EDGES, RED};
 
 /// Scale range searched, detection pixels per reference pixel (before binning).
@@ -394,6 +395,26 @@ fn scan_scale(
         scale_hi: SCALE_MIN * SCALE_STEP.powi(hi as i32),
     };
     Some((pose, cov, s, Some(plateau)))
+}
+
+/// A tip placed at `pose` (frame pixels) on detection image `pyr` with edge map
+/// `edges` rather than found: no edge is a candidate line, and each is scored where
+/// the pose puts it, directly on the edge map, as a pair's left-out edge is.
+pub fn at_pose(t: &Template, pyr: &Pyramid, edges: &EdgeMap, pose: Pose) -> Hypothesis {
+    let k = f64::from(pyr.factor);
+    let pose = Pose {
+        psi: pose.psi,
+        scale: pose.scale / k,
+        apex: pyr.frame_to_detection(pose.apex),
+    };
+    let coverage = std::array::from_fn(|e| walk(t, &pose, e, edges));
+    Hypothesis {
+        pose,
+        members: [None; EDGES],
+        coverage,
+        score: total_score(&coverage),
+        plateau: None,
+    }
 }
 
 /// Scores the edges a hypothesis left out where it puts them (directly on the edge

@@ -60,6 +60,15 @@ const COARSE_RETRIES: [(u32, u32); 3] = [(2, 1), (3, 2), (3, 1)];
 /// (where a second search found nothing but more decoys: docs/tracker.md).
 const RETRY_CONTRAST_NOISES: f64 = 16.0;
 
+/// The binnings of [`COARSE_RETRIES`] over a detection image binned `base x base`,
+/// in turn, each coarser than it.
+fn coarser(base: u32) -> impl Iterator<Item = u32> {
+    COARSE_RETRIES
+        .into_iter()
+        .map(move |(num, den)| num * base / den)
+        .filter(move |&factor| factor > base)
+}
+
 /// The edges a grey-level fit placed: given a band and found by the fit.
 fn fitted_edges(bands: &PerEdge<Option<Band>>, fit: &FitResult) -> PerEdge<bool> {
     std::array::from_fn(|e| bands[e].is_some() && fit.edges[e].is_some())
@@ -317,17 +326,8 @@ impl PyramidTracker {
         // searched again binned more coarsely (less noise per detection pixel, the
         // same step; see COARSE_RETRIES), as long as the tip stays large enough there
         // to be placed.
-        let missed = !estimate.detected;
-        let faintest = Edge::ALL
-            .map(|e| self.calibration.edge(e).contrast.abs())
-            .into_iter()
-            .fold(f64::INFINITY, f64::min);
-        if missed && faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise) {
-            for (num, den) in COARSE_RETRIES {
-                let factor = num * base / den;
-                if factor <= base {
-                    continue;
-                }
+        if !estimate.detected && self.faint_under_noise(det) {
+            for factor in coarser(base) {
                 let det = self.stages(frame, None, own, factor);
                 if let Some(e) = self.search_again(frame, det, &template, false) {
                     estimate = e;
@@ -353,6 +353,58 @@ impl PyramidTracker {
             _ => None,
         };
         estimate
+    }
+
+    /// The estimate of `frame` fitted and verified from `pose` (frame pixels, the
+    /// apex where the imaged edges meet) alone, with no search and nothing carried to
+    /// the next frame: whether a pose known from elsewhere (a rendered frame's truth)
+    /// passes, which tells a frame the search missed from one the verification
+    /// refuses. The pose is placed as the search places a pair's left-out edge (each
+    /// edge's support walked on the edge map where the pose puts it), on the detection
+    /// image the frame is searched on first and, where a missed frame is searched
+    /// again more coarsely, on those binnings in turn until one detects.
+    pub fn track_from(&mut self, frame: &GrayImage, pose: Pose) -> Estimate {
+        let template = *self.calibration.template();
+        let base = super::pyramid::binning_factor(frame.width());
+        let mut own = std::mem::take(&mut self.det);
+        own.built = None;
+        self.build(frame, &mut own, base);
+        let mut estimate = self.evaluate_at(frame, &template, &own, pose);
+        if !estimate.detected && self.faint_under_noise(&own) {
+            for factor in coarser(base) {
+                self.build(frame, &mut own, factor);
+                estimate = self.evaluate_at(frame, &template, &own, pose);
+                if estimate.detected {
+                    break;
+                }
+            }
+        }
+        self.det = own;
+        estimate
+    }
+
+    /// [`Self::evaluate`] of `pose` (frame pixels) placed on `det`.
+    fn evaluate_at(
+        &mut self,
+        frame: &GrayImage,
+        t: &Template,
+        det: &Detection,
+        pose: Pose,
+    ) -> Estimate {
+        self.factor = det.pyr.factor;
+        let hyp = super::hypothesis::at_pose(t, &det.pyr, &det.edges, pose);
+        self.evaluate(frame, t, &hyp)
+    }
+
+    /// Whether the faintest calibrated edge steps by fewer than
+    /// [`RETRY_CONTRAST_NOISES`] of the gradient noise of `det`'s detection image: a
+    /// missed frame is searched again more coarsely ([`coarser`]).
+    fn faint_under_noise(&self, det: &Detection) -> bool {
+        let faintest = Edge::ALL
+            .map(|e| self.calibration.edge(e).contrast.abs())
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        faintest < RETRY_CONTRAST_NOISES * f64::from(det.edges.noise)
     }
 
     /// The edge threshold of this tracker on detection image `pyr` (none without the
@@ -858,6 +910,34 @@ impl Tracker {
                 cantilever,
                 ..
             } => tracker.track(frame).with_force(*cantilever),
+        }
+    }
+
+    /// The estimate of `frame` fitted and verified from `pose` alone, with no search
+    /// (`PyramidTracker::track_from`, [`RigidTracker::track_from`]): whether a pose
+    /// known from elsewhere passes the verification. A pose that is not one (a
+    /// coordinate not finite, a scale not positive) is refused for what is wrong with
+    /// it.
+    pub fn track_from(&mut self, frame: &GrayImage, pose: Pose) -> Estimate {
+        let refusal = if !pose.apex.iter().all(|c| c.is_finite()) {
+            Some(Miss::ApexOutside)
+        } else if !(pose.scale.is_finite() && pose.scale > 0.0) {
+            Some(Miss::ScaleMismatch)
+        } else if !pose.psi.is_finite() {
+            Some(Miss::RotationOutside)
+        } else {
+            None
+        };
+        if let Some(miss) = refusal {
+            return Estimate::missed(miss, 0.0);
+        }
+        match &mut self.engine {
+            Engine::Pyramid(t) => t.track_from(frame, pose),
+            Engine::Rigid {
+                tracker,
+                cantilever,
+                ..
+            } => tracker.track_from(frame, pose).with_force(*cantilever),
         }
     }
 

@@ -216,7 +216,7 @@ pub mod rendered {
     use nanoforce::scene::{
         render, render_into, render_over_into, FrameSpec, Segment, Session, MAGNIFICATIONS,
     };
-    use nanoforce::vision::{Calibration, Estimate, ScaleRange, Tracker};
+    use nanoforce::vision::{Calibration, Estimate, Pose, ScaleRange, Tracker};
 
     /// The tracker settings and calibration clicks the session's probe.toml would hold:
     /// the scales the SEM gives over the reference's (`scale_range`), and the clicks.
@@ -414,5 +414,40 @@ pub mod rendered {
             }
         }
         (truths, estimates)
+    }
+
+    /// For each probe frame of `run_all_over(sessions, crops)` (which gave `truths` and
+    /// `estimates`) that was missed: its index and its estimate fitted and verified from
+    /// its true pose alone (`Tracker::track_from`). Detected there, the search missed it;
+    /// refused there too, the verification refuses the frame itself.
+    pub fn misses_from_truth(
+        sessions: &[Session],
+        crops: &[GrayImage],
+        truths: &[Truth],
+        estimates: &[Estimate],
+    ) -> Vec<(usize, Estimate)> {
+        let per_session = sessions.first().map_or(1, |s| s.frames.len());
+        let mut out = Vec::new();
+        let mut frame = GrayImage::new(1, 1);
+        for (i, s) in sessions.iter().enumerate() {
+            let range = i * per_session..(i + 1) * per_session;
+            let missed: Vec<usize> = range
+                .filter(|&j| truths[j].detected && !estimates[j].detected)
+                .collect();
+            if missed.is_empty() {
+                continue;
+            }
+            let mut tracker = tracker_over(s, crops);
+            for j in missed {
+                let t = render_over_into(&s.frames[j - i * per_session], crops, &mut frame);
+                let pose = Pose {
+                    psi: -t.angle_deg.to_radians(),
+                    scale: t.magnification / s.reference.magnification,
+                    apex: [t.tip_x, t.tip_y],
+                };
+                out.push((j, tracker.track_from(&frame, pose)));
+            }
+        }
+        out
     }
 }
