@@ -108,7 +108,7 @@ impl Edge {
         }
     }
 
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Edge::Red => "red",
             Edge::Blue => "blue",

@@ -2,7 +2,8 @@
 //! coordinates count from ([`PixelOrigin`]), the `[tracker]` settings
 //! ([`TrackerConfig`]) and the clicked calibration ([`CalibrationConfig`]). `config`
 //! reads and validates them from TOML; vision owns them.
-use super::template::PerEdge;
+use super::template::{PerEdge, EDGES};
+use super::Edge;
 use std::fmt;
 use std::path::PathBuf;
 
@@ -160,8 +161,16 @@ pub struct CalibrationConfig {
     pub apex: Option<[String; 2]>,
 }
 
-/// The AFM pyramid's edge names, in [`crate::vision::Edge`] order.
-pub const PYRAMID_EDGES: PerEdge<&str> = ["red", "blue", "green"];
+/// The AFM pyramid's edge names ([`Edge::name`]), in [`Edge::ALL`] order.
+pub const PYRAMID_EDGES: PerEdge<&str> = {
+    let mut names = [""; EDGES];
+    let mut e = 0;
+    while e < EDGES {
+        names[e] = Edge::ALL[e].name();
+        e += 1;
+    }
+    names
+};
 
 impl CalibrationConfig {
     /// The AFM pyramid's clicks.
