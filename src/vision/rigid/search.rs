@@ -255,10 +255,9 @@ impl Search {
         scales: ScaleRange,
         apexes_made: Apexes,
     ) {
-        let scored = match apexes_made {
-            Apexes::RunEnds => &mut self.scored,
-            Apexes::WithinRunsToo => &mut self.within,
-        };
+        // Out of `self` while it fills, so that the first round's list can be read
+        // beside the second's; moved back (with its buffer) when sorted.
+        let mut scored = std::mem::take(self.list(apexes_made));
         scored.clear();
         let (n_psi, n_rho) = (self.n_psi, self.n_rho);
         let row = |k: usize, i: usize| (k * n_psi + i) * n_rho;
@@ -376,13 +375,18 @@ impl Search {
             }
         }
         if apexes_made == Apexes::WithinRunsToo {
-            self.within.extend_from_slice(&self.scored);
+            scored.extend_from_slice(&self.scored);
         }
-        let scored = match apexes_made {
+        scored.sort_by(|x, y| y.votes.total_cmp(&x.votes).then(x.order.cmp(&y.order)));
+        *self.list(apexes_made) = scored;
+    }
+
+    /// The list of scored placements a round with `apexes_made` fills.
+    fn list(&mut self, apexes_made: Apexes) -> &mut Vec<Scored> {
+        match apexes_made {
             Apexes::RunEnds => &mut self.scored,
             Apexes::WithinRunsToo => &mut self.within,
-        };
-        scored.sort_by(|x, y| y.votes.total_cmp(&x.votes).then(x.order.cmp(&y.order)));
+        }
     }
 }
 
