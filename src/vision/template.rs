@@ -73,7 +73,7 @@ pub struct Template {
     pub beam_px: Option<f64>,
 }
 
-/// Where a probe's template sits in a frame: an AFM tip's ([`Template`]) or a rigid
+/// Where a probe's template sits in a frame: an AFM tip's (`Template`) or a rigid
 /// probe's (`RigidTemplate`, which places its edges with `Pose::place`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pose {

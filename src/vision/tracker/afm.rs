@@ -1,5 +1,5 @@
-//! The per-frame driver: detection on the binned frame, the rigid-tip search, sub-pixel
-//! refinement on the full frame, verification, and the estimate.
+//! The AFM pyramid's engine: detection on the binned frame, the rigid-tip search,
+//! sub-pixel refinement on the full frame, verification, and the estimate.
 //!
 //! Coherence (the paper's "mesh shifted" variant) is a shortcut, never a dependency: when
 //! the last estimate was confident the search first looks only near its rotation, and
@@ -14,23 +14,22 @@
 
 use image::GrayImage;
 
-use super::bands::{bands, bend_prior, refined_pose, visible_segment};
-use super::calibration::{CalibratedEdge, Calibration};
-use super::candidates::{Candidates, CANDIDATES_PER_EDGE, WIDE_CANDIDATES_PER_EDGE};
-use super::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
-use super::edges::EdgeMap;
-use super::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
-use super::hough::{Hough, PEAKS_PER_EDGE, WIDE_PEAKS_PER_EDGE};
-use super::hypothesis::{Hypothesis, Prior, Search};
-use super::options::{CalibrationConfig, PixelOrigin, ScaleRange, Threshold, TrackerConfig};
-use super::pyramid::Pyramid;
-use super::refine::{half_width, Band, FitResult, Refiner, Tie, Turns};
-use super::rigid::{calibrate as calibrate_rigid, RigidError, RigidTemplate, RigidTracker};
-use super::stations;
-use super::template::{PerEdge, Pose, Template, BLUE, EDGES, GREEN, RED};
-use super::verify::{self, Evidence, MIN_CONFIDENCE};
-use super::{Edge, EdgeFit, Estimate, Miss, VisionError, MAX_EDGES};
 use crate::model::Cantilever;
+use crate::vision::bands::{bands, bend_prior, refined_pose, visible_segment};
+use crate::vision::calibration::{CalibratedEdge, Calibration};
+use crate::vision::candidates::{Candidates, CANDIDATES_PER_EDGE, WIDE_CANDIDATES_PER_EDGE};
+use crate::vision::claim::{claimed, rule_out, Claim, MAX_PROBES, NO_CLAIMS};
+use crate::vision::edges::EdgeMap;
+use crate::vision::geometry::{norm, screen_deg_from_image_rad, sub, wrap_pi};
+use crate::vision::hough::{Hough, PEAKS_PER_EDGE, WIDE_PEAKS_PER_EDGE};
+use crate::vision::hypothesis::{Hypothesis, Prior, Search};
+use crate::vision::options::{PixelOrigin, ScaleRange, Threshold, TrackerConfig};
+use crate::vision::pyramid::Pyramid;
+use crate::vision::refine::{half_width, Band, FitResult, Refiner, Tie, Turns};
+use crate::vision::stations;
+use crate::vision::template::{PerEdge, Pose, Template, BLUE, EDGES, GREEN, RED};
+use crate::vision::verify::{self, Evidence, MIN_CONFIDENCE};
+use crate::vision::{Edge, EdgeFit, Estimate, Miss, MAX_EDGES};
 
 /// How far the coherent search looks around the last rotation, radians.
 const COHERENT_TOL_RAD: f64 = 0.07;
@@ -136,7 +135,7 @@ fn outranks(alt: &Estimate, best: &Estimate, first: f64) -> bool {
 
 /// The detection image of a frame and its edge map: the stages of [`PyramidTracker::track`]
 /// that depend only on the frame, the binning and the edge threshold, which the
-/// trackers of several probes in one view share ([`super::ProbeSet`]).
+/// trackers of several probes in one view share ([`crate::vision::ProbeSet`]).
 #[derive(Debug, Default)]
 pub struct Detection {
     pyr: Pyramid,
@@ -257,7 +256,11 @@ impl PyramidTracker {
     /// Builds into `shared` the detection stages this tracker first searches `frame`
     /// on, for the other probes' trackers to share ([`PyramidTracker::track_sharing`]).
     pub(super) fn build_shared(&self, frame: &GrayImage, shared: &mut Detection) {
-        self.build(frame, shared, super::pyramid::binning_factor(frame.width()));
+        self.build(
+            frame,
+            shared,
+            crate::vision::pyramid::binning_factor(frame.width()),
+        );
     }
 
     /// As [`PyramidTracker::track`], searching on the stages `shared` holds for this
@@ -298,7 +301,7 @@ impl PyramidTracker {
     ) -> Estimate {
         self.last_before = self.last;
         let template = *self.calibration.template();
-        let base = super::pyramid::binning_factor(frame.width());
+        let base = crate::vision::pyramid::binning_factor(frame.width());
         let det = self.stages(frame, shared, own, base);
         self.search_stages(det, &template, false);
         let prior = match (self.coherence, self.last) {
@@ -365,7 +368,7 @@ impl PyramidTracker {
     /// again more coarsely, on those binnings in turn until one detects.
     pub fn track_from(&mut self, frame: &GrayImage, pose: Pose) -> Estimate {
         let template = *self.calibration.template();
-        let base = super::pyramid::binning_factor(frame.width());
+        let base = crate::vision::pyramid::binning_factor(frame.width());
         let mut own = std::mem::take(&mut self.det);
         own.built = None;
         self.build(frame, &mut own, base);
@@ -392,7 +395,7 @@ impl PyramidTracker {
         pose: Pose,
     ) -> Estimate {
         self.factor = det.pyr.factor;
-        let hyp = super::hypothesis::at_pose(t, &det.pyr, &det.edges, pose);
+        let hyp = crate::vision::hypothesis::at_pose(t, &det.pyr, &det.edges, pose);
         self.evaluate(frame, t, &hyp)
     }
 
@@ -588,7 +591,7 @@ impl PyramidTracker {
             .beam_px
             .and_then(|_| stations::beam_edge_scale(frame, t, &pose, fit.blur, red_step));
         if let Some(scale) = shown {
-            let moved = super::hypothesis::rescaled(hyp, scale / k);
+            let moved = crate::vision::hypothesis::rescaled(hyp, scale / k);
             if let Some((pose, fit, bands)) = self.refine(frame, t, &moved, true) {
                 let second = self.verdict(frame, t, &moved, &pose, &fit, &bands);
                 if second.detected && fitted_edges(&bands, &fit)[RED] {
@@ -601,7 +604,7 @@ impl PyramidTracker {
         let Some(scale) = stations::beam_out_of_view_scale(frame, t, &pose, fit.blur) else {
             return first;
         };
-        let moved = super::hypothesis::rescaled(hyp, scale / k);
+        let moved = crate::vision::hypothesis::rescaled(hyp, scale / k);
         let Some((pose, fit, bands)) = self.refine(frame, t, &moved, false) else {
             return first;
         };
@@ -632,7 +635,7 @@ impl PyramidTracker {
         let pose = Pose {
             psi: hyp.pose.psi,
             scale: hyp.pose.scale * k,
-            apex: super::pyramid::to_frame(self.factor, hyp.pose.apex),
+            apex: crate::vision::pyramid::to_frame(self.factor, hyp.pose.apex),
         };
         let size = [frame.width() as f64, frame.height() as f64];
         // Fit the edges the search found: its lines, and a left-out edge only where the
@@ -777,7 +780,7 @@ impl PyramidTracker {
             force_saturated: false,
             apex_px: Some(apex),
             edges,
-            angle_sigma_deg: Some(super::sigma::angle_sigma_deg(fit.turn_error_sigma)),
+            angle_sigma_deg: Some(crate::vision::sigma::angle_sigma_deg(fit.turn_error_sigma)),
             // Measured only by the beam edge's distance from the apex; the faces alone
             // leave it free over a range.
             scale: fitted_edges(bands, fit)[RED].then_some(pose.scale),
@@ -785,200 +788,6 @@ impl PyramidTracker {
             miss: None,
         }
         .with_force(self.cantilever)
-    }
-}
-
-/// Tracks one calibrated probe frame after frame: the AFM pyramid (red, blue, green)
-/// or a rigid probe of named edges (`super::rigid`). Either gives the one
-/// [`Estimate`]; a probe with a cantilever gives its force.
-#[derive(Debug)]
-pub struct Tracker {
-    engine: Engine,
-}
-
-#[derive(Debug)]
-enum Engine {
-    Pyramid(Box<PyramidTracker>),
-    Rigid {
-        tracker: Box<RigidTracker>,
-        cantilever: Option<Cantilever>,
-        pixel_origin: PixelOrigin,
-    },
-}
-
-impl Tracker {
-    /// The AFM pyramid's tracker for the probe `calibration` describes; `cantilever`
-    /// enables forces.
-    pub fn new(
-        cfg: &TrackerConfig,
-        calibration: Calibration,
-        cantilever: Option<Cantilever>,
-    ) -> Tracker {
-        Tracker {
-            engine: Engine::Pyramid(Box::new(PyramidTracker::new(cfg, calibration, cantilever))),
-        }
-    }
-
-    /// A rigid probe's tracker; `cantilever` (a tipless cantilever's) turns its
-    /// rotation into a force. Refused when `tracker.scale_range` reaches beyond the
-    /// scales a rigid probe is searched over.
-    pub fn rigid(
-        cfg: &TrackerConfig,
-        template: RigidTemplate,
-        cantilever: Option<Cantilever>,
-    ) -> Result<Tracker, RigidError> {
-        let mut tracker = RigidTracker::new(template, cfg.window_deg);
-        if let Some(scales) = cfg.scale_range {
-            tracker = tracker.with_scales(scales)?;
-        }
-        tracker.set_coherence(true);
-        Ok(Tracker {
-            engine: Engine::Rigid {
-                tracker: Box::new(tracker),
-                cantilever,
-                pixel_origin: cfg.pixel_origin,
-            },
-        })
-    }
-
-    /// The tracker `clicks` calibrate on `reference`: the pyramid's for red, blue and
-    /// green, a rigid probe's for named edges.
-    pub fn from_reference(
-        reference: &GrayImage,
-        clicks: &CalibrationConfig,
-        cfg: &TrackerConfig,
-        cantilever: Option<Cantilever>,
-    ) -> Result<Tracker, VisionError> {
-        match (&clicks.apex, clicks.pyramid_points()) {
-            (None, Some(_)) => {
-                let calibration = Calibration::from_reference(reference, clicks, cfg)?;
-                Ok(Tracker::new(cfg, calibration, cantilever))
-            }
-            (apex, _) => {
-                let apex = apex.as_ref().ok_or_else(|| {
-                    VisionError::Degenerate("a probe of named edges needs its apex edges".into())
-                })?;
-                let template = calibrate_rigid(
-                    reference,
-                    &clicks.edges,
-                    [apex[0].as_str(), apex[1].as_str()],
-                )?;
-                Ok(Tracker::rigid(cfg, template, cantilever)?)
-            }
-        }
-    }
-
-    /// Turns coherence (searching near the last estimate first) on or off.
-    pub fn set_coherence(&mut self, on: bool) {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.set_coherence(on),
-            Engine::Rigid { tracker, .. } => tracker.set_coherence(on),
-        }
-    }
-
-    /// Forgets the last estimate.
-    pub fn reset(&mut self) {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.reset(),
-            Engine::Rigid { tracker, .. } => tracker.reset(),
-        }
-    }
-
-    /// The pyramid's calibration; none for a rigid probe of named edges.
-    pub fn calibration(&self) -> Option<&Calibration> {
-        match &self.engine {
-            Engine::Pyramid(t) => Some(t.calibration()),
-            Engine::Rigid { .. } => None,
-        }
-    }
-
-    /// Where the configuration counts pixels from: estimates are in the conventions'
-    /// frame, and what writes them out converts with [`Estimate::with_pixel_origin`].
-    pub fn pixel_origin(&self) -> PixelOrigin {
-        match &self.engine {
-            Engine::Pyramid(t) => t.pixel_origin(),
-            Engine::Rigid { pixel_origin, .. } => *pixel_origin,
-        }
-    }
-
-    /// Tracks the probe in one 8-bit frame.
-    pub fn track(&mut self, frame: &GrayImage) -> Estimate {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.track(frame),
-            Engine::Rigid {
-                tracker,
-                cantilever,
-                ..
-            } => tracker.track(frame).with_force(*cantilever),
-        }
-    }
-
-    /// The estimate of `frame` fitted and verified from `pose` alone, with no search
-    /// (`PyramidTracker::track_from`, [`RigidTracker::track_from`]): whether a pose
-    /// known from elsewhere passes the verification. A pose that is not one (a
-    /// coordinate not finite, a scale not positive) is refused for what is wrong with
-    /// it.
-    pub fn track_from(&mut self, frame: &GrayImage, pose: Pose) -> Estimate {
-        let refusal = if !pose.apex.iter().all(|c| c.is_finite()) {
-            Some(Miss::ApexOutside)
-        } else if !(pose.scale.is_finite() && pose.scale > 0.0) {
-            Some(Miss::ScaleMismatch)
-        } else if !pose.psi.is_finite() {
-            Some(Miss::RotationOutside)
-        } else {
-            None
-        };
-        if let Some(miss) = refusal {
-            return Estimate::missed(miss, 0.0);
-        }
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.track_from(frame, pose),
-            Engine::Rigid {
-                tracker,
-                cantilever,
-                ..
-            } => tracker.track_from(frame, pose).with_force(*cantilever),
-        }
-    }
-
-    /// Builds into `shared` the detection stages this probe's tracker first searches
-    /// `frame` on, for the other probes' trackers ([`PyramidTracker::build_shared`]);
-    /// a rigid probe's tracker shares none.
-    pub(super) fn build_shared(&self, frame: &GrayImage, shared: &mut Detection) {
-        if let Engine::Pyramid(t) = &self.engine {
-            t.build_shared(frame, shared);
-        }
-    }
-
-    /// As [`Tracker::track`], on the pyramid's detection stages `shared` holds where
-    /// they are this tracker's ([`PyramidTracker::track_sharing`]).
-    pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.track_sharing(frame, shared),
-            Engine::Rigid { .. } => self.track(frame),
-        }
-    }
-
-    /// Rules out one more body of another probe; false when it already was, or no
-    /// room is left.
-    pub(super) fn exclude_more(&mut self, claim: Claim) -> bool {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.exclude_more(claim),
-            Engine::Rigid { tracker, .. } => tracker.exclude_more(claim),
-        }
-    }
-
-    /// Tracks the frame just tracked again with what is now ruled out
-    /// ([`PyramidTracker::retrack_sharing`]).
-    pub(super) fn retrack_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
-        match &mut self.engine {
-            Engine::Pyramid(t) => t.retrack_sharing(frame, shared),
-            Engine::Rigid {
-                tracker,
-                cantilever,
-                ..
-            } => tracker.retrack(frame).with_force(*cantilever),
-        }
     }
 }
 
