@@ -259,11 +259,7 @@ fn a_pose_known_from_elsewhere_is_fitted_and_verified_without_a_search() {
     let mut verified = 0;
     for spec in session.frames.iter().take(20) {
         let (frame, truth) = render(spec);
-        let pose = Pose {
-            psi: -truth.angle_deg.to_radians(),
-            scale: truth.magnification / session.reference.magnification,
-            apex: [truth.tip_x, truth.tip_y],
-        };
+        let pose = rendered::true_pose(&truth, &session.reference);
         let found = tracker.track(&frame);
         if !truth.probe_in_view {
             assert!(!found.detected);

@@ -416,6 +416,16 @@ pub mod rendered {
         (truths, estimates)
     }
 
+    /// The pose of a rendered frame's probe as its truth `t` gives it, on a tracker
+    /// calibrated on `reference` (not numbers when the probe is out of view).
+    pub fn true_pose(t: &nanoforce::scene::Truth, reference: &FrameSpec) -> Pose {
+        Pose {
+            psi: -t.angle_deg.to_radians(),
+            scale: t.magnification / reference.magnification,
+            apex: [t.tip_x, t.tip_y],
+        }
+    }
+
     /// For each probe frame of `run_all_over(sessions, crops)` (which gave `truths` and
     /// `estimates`) that was missed: its index and its estimate fitted and verified from
     /// its true pose alone (`Tracker::track_from`). Detected there, the search missed it;
@@ -440,12 +450,7 @@ pub mod rendered {
             let mut tracker = tracker_over(s, crops);
             for j in missed {
                 let t = render_over_into(&s.frames[j - i * per_session], crops, &mut frame);
-                let pose = Pose {
-                    psi: -t.angle_deg.to_radians(),
-                    scale: t.magnification / s.reference.magnification,
-                    apex: [t.tip_x, t.tip_y],
-                };
-                out.push((j, tracker.track_from(&frame, pose)));
+                out.push((j, tracker.track_from(&frame, true_pose(&t, &s.reference))));
             }
         }
         out

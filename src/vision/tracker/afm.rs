@@ -248,7 +248,7 @@ impl PyramidTracker {
 
     /// Tracks the tip in one 8-bit frame.
     pub fn track(&mut self, frame: &GrayImage) -> Estimate {
-        self.det.built = None;
+        self.det.clear();
         self.excluded = NO_CLAIMS;
         self.track_frame(frame, None)
     }
@@ -267,7 +267,7 @@ impl PyramidTracker {
     /// frame (from another probe's tracker) where they are this tracker's (the same
     /// binning, the same edge threshold), and on its own otherwise.
     pub(super) fn track_sharing(&mut self, frame: &GrayImage, shared: &Detection) -> Estimate {
-        self.det.built = None;
+        self.det.clear();
         self.excluded = NO_CLAIMS;
         self.track_frame(frame, Some(shared))
     }
@@ -370,7 +370,7 @@ impl PyramidTracker {
         let template = *self.calibration.template();
         let base = crate::vision::pyramid::binning_factor(frame.width());
         let mut own = std::mem::take(&mut self.det);
-        own.built = None;
+        own.clear();
         self.build(frame, &mut own, base);
         let mut estimate = self.evaluate_at(frame, &template, &own, pose);
         if !estimate.detected && self.faint_under_noise(&own) {
