@@ -49,7 +49,17 @@ struct Measured {
     /// Misses that the fit from the true pose refuses too: the verification's, not
     /// the search's.
     refused_at_truth: usize,
+    /// Detections whose tip point lies more than [`MISPLACED_PX`] from the truth.
+    misplaced: Vec<String>,
 }
+
+/// A detection whose tip point lies farther than this from the true one (pixels) has
+/// taken something else for a corner of the tool. Over the tool-suite seeds 41, 97
+/// and 5-30 the tip points lie 0.1-0.2 px off in the median and within 4 px but for
+/// three detections 11-22 px off (seeds 25 and 29: a needle read at 0.64 of its
+/// scale; two tipless levers with a brighter particle over their end, whose far side
+/// was taken for the end face).
+const MISPLACED_PX: f64 = 5.0;
 
 /// The scales the lab states (`tracker.scale_range`): the suite's magnifications over
 /// the reference's, known to the lab to 10 %. `TOOL_SCALES=widest` searches the
@@ -201,8 +211,15 @@ fn run(session: &ToolSession, others: &[&ToolSession], crops: &[GrayImage], out:
             );
         }
         let a = e.apex_px.unwrap();
-        out.apex_errors
-            .push((a[0] - truth.apex_px[0]).hypot(a[1] - truth.apex_px[1]));
+        let apex_error = (a[0] - truth.apex_px[0]).hypot(a[1] - truth.apex_px[1]);
+        out.apex_errors.push(apex_error);
+        if apex_error > MISPLACED_PX {
+            out.misplaced.push(format!(
+                "{} frame {k}: apex {apex_error:.1} px off, scale {:.3} (true {true_scale:.3})",
+                session.kind.name(),
+                e.scale.unwrap_or(f64::NAN)
+            ));
+        }
     }
     for other in others {
         for (k, spec) in other.frames.iter().enumerate() {
@@ -271,6 +288,9 @@ fn measure(kind: ToolKind) -> Measured {
     for miss in &m.misses {
         println!("  missed {miss}");
     }
+    for d in &m.misplaced {
+        println!("  misplaced {d}");
+    }
     m
 }
 
@@ -300,6 +320,12 @@ fn check(kind: ToolKind) {
         "{}: {} false",
         kind.name(),
         m.false_detections
+    );
+    assert!(
+        m.misplaced.is_empty(),
+        "{}: misplaced {:?}",
+        kind.name(),
+        m.misplaced
     );
     let (median, p95) = (quantile(&m.errors, 0.5), quantile(&m.errors, 0.95));
     assert!(

@@ -354,7 +354,7 @@ fn a_probe_refused_beside_a_found_one_is_searched_again_without_its_body() {
     println!(
         "lever detected in the set {in_set}, by its tracker alone {alone}, regained {regained}"
     );
-    // 206 in the set, 205 alone: the frame the beam's placements take whole is
+    // 205 in the set, 204 alone: the frame the beam's placements take whole is
     // regained, and no frame the tracker finds alone is lost.
     assert!(
         regained >= 1 && in_set >= alone,

@@ -310,9 +310,13 @@ impl Fitter {
             && !(0..t.edges.len()).any(|e| away(&e) && edges[e].is_some());
         let refusal = refusal.or_else(|| {
             // One apex edge may lose its corner to a particle beside the tip, while
-            // the other shows it and the apex itself shows the surroundings.
-            let hidden = hidden_corner
-                .filter(|&e| self.whole_corner || !self.particle_beside_tip(frame, t, &pose, e));
+            // the other shows it and the apex itself shows the surroundings; a corner
+            // lost away from the apex too is a particle over the probe's whole end.
+            let hidden = hidden_corner.filter(|&e| {
+                self.whole_corner
+                    || !self.particle_beside_tip(frame, t, &pose, e)
+                    || self.far_corner_hidden(frame, t, &pose)
+            });
             if let Some(e) = hidden {
                 Some(Miss::EdgeMissing(t.edges[e].name))
             } else if size_unseen {
@@ -414,7 +418,7 @@ impl Fitter {
         let past = level(add(pose.apex, scale(out, LEVEL_NEAR)), out).map(|v| levels.share(v));
         let beyond = past.is_some_and(|r| r > 1.0 + COVERED_LEVEL);
         let carries_on = self
-            .corner_stations(t, hidden)
+            .corner_stations(hidden, apex_end(edge))
             .into_iter()
             .flatten()
             .all(|p| {
@@ -554,12 +558,11 @@ impl Fitter {
         }
     }
 
-    /// The [`APEX_STATIONS`] stations of apex edge `e` nearest the apex, counted from
-    /// it (fewer when the edge has fewer).
-    fn corner_stations(&self, t: &RigidTemplate, e: usize) -> [Option<Point>; APEX_STATIONS] {
-        let edge = &t.edges[e];
+    /// The [`APEX_STATIONS`] stations of edge `e` nearest its end `end` (0 or 1, as
+    /// its extent), counted from that end (fewer when the edge has fewer).
+    fn corner_stations(&self, e: usize, end: usize) -> [Option<Point>; APEX_STATIONS] {
         // Stations run from extent[0] to extent[1].
-        let from_low = apex_end(edge) == 0;
+        let from_low = end == 0;
         let count = self.points.iter().filter(|p| p.edge == e).count();
         let nearest = APEX_STATIONS.min(count);
         let skip = if from_low { 0 } else { count - nearest };
@@ -577,11 +580,44 @@ impl Fitter {
         stations
     }
 
-    /// All but one of the [`APEX_STATIONS`] stations nearest the apex on apex edge `e`
-    /// show it within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
-    /// ([`Fitter::shown_off`]).
+    /// Whether apex edge `e` shows the apex ([`Fitter::corner_held`] at its apex end).
     fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
-        let stations = self.corner_stations(t, e);
+        self.corner_held(frame, t, pose, e, apex_end(&t.edges[e]))
+    }
+
+    /// Whether an edge away from the apex fails to show one of its closed corners
+    /// whose nearest stations lie in view ([`Fitter::corner_held`]). Asked where a
+    /// particle took the apex's corner from one apex edge: a particle at the probe's
+    /// level beside the tip leaves the probe's other corners as they are, while one
+    /// over the whole end of the probe (wider than a tipless lever is thick) lengthens
+    /// it by its size, the end face then placed on the particle's far side, and takes
+    /// the corner of the flank away from the apex as well (tipless levers placed 17
+    /// and 23 px past their ends, several-probe seeds 8 and 5).
+    fn far_corner_hidden(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose) -> bool {
+        for e in (0..t.edges.len()).filter(|e| !t.apex_edges.contains(e)) {
+            for end in (0..2).filter(|&end| !t.edges[e].open[end]) {
+                let stations = self.corner_stations(e, end);
+                let in_view = stations.iter().all(|p| p.is_some_and(|p| p.in_view));
+                if in_view && !self.corner_held(frame, t, pose, e, end) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// All but one of the [`APEX_STATIONS`] stations nearest end `end` of edge `e` show
+    /// the edge within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
+    /// ([`Fitter::shown_off`]).
+    fn corner_held(
+        &mut self,
+        frame: &GrayImage,
+        t: &RigidTemplate,
+        pose: &Pose,
+        e: usize,
+        end: usize,
+    ) -> bool {
+        let stations = self.corner_stations(e, end);
         let nearest = stations.iter().flatten().count();
         let mut shown = 0;
         for (slot, p) in stations.iter().enumerate() {
@@ -665,7 +701,7 @@ impl Fitter {
         if end != apex_end(&t.edges[e]) {
             return RUN_ON_SHARE;
         }
-        let corner = self.corner_stations(t, e);
+        let corner = self.corner_stations(e, end);
         let own = median_step(corner.iter().flatten());
         let closing = median_step(self.points.iter().filter(|p| p.edge == other));
         if closing >= CLOSING_SHARE * own {
