@@ -56,9 +56,9 @@ struct Measured {
 /// A detection whose tip point lies farther than this from the true one (pixels) has
 /// taken something else for a corner of the tool. Over the tool-suite seeds 41, 97
 /// and 5-30 the tip points lie 0.1-0.2 px off in the median and within 4 px but for
-/// three detections 11-22 px off (seeds 25 and 29: a needle read at 0.64 of its
-/// scale; two tipless levers with a brighter particle over their end, whose far side
-/// was taken for the end face).
+/// four detections 11-22 px off: a needle read at 0.64 of its scale (seed 25) and
+/// three tipless levers with a particle at their end, taken for part of the lever
+/// (seeds 21 and 29).
 const MISPLACED_PX: f64 = 5.0;
 
 /// The scales the lab states (`tracker.scale_range`): the suite's magnifications over
