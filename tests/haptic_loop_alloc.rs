@@ -137,7 +137,13 @@ fn haptic_loop_does_not_allocate_in_steady_state() {
         ..RunOptions::default()
     };
     let handle = Daemon::start(TeleopGains::default(), devices, options).unwrap();
-    std::thread::sleep(Duration::from_millis(300));
+    // Engaged once the stylus is centred, later on a loaded machine than on an idle
+    // one: the steady state is what is measured, so it is waited for.
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while handle.loop_shared.state() != SafetyState::Engaged && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(10));
+    }
     assert_eq!(handle.loop_shared.state(), SafetyState::Engaged);
     alloc_counter::start();
     let ticks_before = handle.loop_shared.ticks.load(Ordering::SeqCst);
