@@ -582,7 +582,8 @@ impl Fitter {
 
     /// Whether apex edge `e` shows the apex ([`Fitter::corner_held`] at its apex end).
     fn apex_held(&mut self, frame: &GrayImage, t: &RigidTemplate, pose: &Pose, e: usize) -> bool {
-        self.corner_held(frame, t, pose, e, apex_end(&t.edges[e]))
+        let stations = self.corner_stations(e, apex_end(&t.edges[e]));
+        self.corner_held(frame, t, pose, &stations)
     }
 
     /// Whether an edge away from the apex fails to show one of its closed corners
@@ -598,7 +599,7 @@ impl Fitter {
             for end in (0..2).filter(|&end| !t.edges[e].open[end]) {
                 let stations = self.corner_stations(e, end);
                 let in_view = stations.iter().all(|p| p.is_some_and(|p| p.in_view));
-                if in_view && !self.corner_held(frame, t, pose, e, end) {
+                if in_view && !self.corner_held(frame, t, pose, &stations) {
                     return true;
                 }
             }
@@ -606,18 +607,16 @@ impl Fitter {
         false
     }
 
-    /// All but one of the [`APEX_STATIONS`] stations nearest end `end` of edge `e` show
-    /// the edge within [`HELD_PX`], and the nearest within [`NEAREST_PX`]
-    /// ([`Fitter::shown_off`]).
+    /// All but one of a corner's `stations` ([`Fitter::corner_stations`], nearest
+    /// first) show their edge within [`HELD_PX`], and the nearest within
+    /// [`NEAREST_PX`] ([`Fitter::shown_off`]).
     fn corner_held(
         &mut self,
         frame: &GrayImage,
         t: &RigidTemplate,
         pose: &Pose,
-        e: usize,
-        end: usize,
+        stations: &[Option<Point>; APEX_STATIONS],
     ) -> bool {
-        let stations = self.corner_stations(e, end);
         let nearest = stations.iter().flatten().count();
         let mut shown = 0;
         for (slot, p) in stations.iter().enumerate() {
