@@ -27,6 +27,7 @@ use nanoforce::vision::{
     DEFAULT_WINDOW_DEG, RIGID_SCALES,
 };
 use tracker_support::rendered::real_crops;
+use tracker_support::MISPLACED_PX;
 
 /// Sessions per kind and frames per session: 16 x 20 = 320 frames, about 300 in view.
 const SESSIONS: usize = 16;
@@ -52,14 +53,6 @@ struct Measured {
     /// Detections whose tip point lies more than [`MISPLACED_PX`] from the truth.
     misplaced: Vec<String>,
 }
-
-/// A detection whose tip point lies farther than this from the true one (pixels) has
-/// taken something else for a corner of the tool. Over the tool-suite seeds 41, 97
-/// and 5-30 the tip points lie 0.1-0.2 px off in the median and within 4 px but for
-/// four detections 11-22 px off, each with a particle at the tool's end taken for
-/// part of it: a needle read at 0.64 of its scale (seed 25) and three tipless levers
-/// (seeds 21 and 29).
-const MISPLACED_PX: f64 = 5.0;
 
 /// The scales the lab states (`tracker.scale_range`): the suite's magnifications over
 /// the reference's, known to the lab to 10 %. `TOOL_SCALES=widest` searches the

@@ -18,7 +18,7 @@ use nanoforce::scene::{
 };
 use nanoforce::session::results::read_results;
 use nanoforce::vision::{Estimate, Miss, ProbeSet, Tracker};
-use tracker_support::{rendered, score, Truth};
+use tracker_support::{rendered, score, Truth, MISPLACED_PX};
 
 fn seed(default: u64) -> u64 {
     std::env::var("PROBES_SEED")
@@ -197,10 +197,6 @@ fn beside_a_cantilever(kind: ToolKind, seed: u64) -> (Session, Vec<Tracker>) {
     let trackers = trackers(&session);
     (session, trackers)
 }
-
-/// A tool's detection whose tip point lies farther than this from the true one
-/// (pixels) took something else for a corner of the tool (as in tests/rigid_probes.rs).
-const MISPLACED_PX: f64 = 5.0;
 
 /// The frames (by index) whose detection lies more than [`MISPLACED_PX`] from the
 /// truth's tip.
